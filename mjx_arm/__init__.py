@@ -1,0 +1,63 @@
+"""The soft pneumatic arm in MuJoCo and MJX."""
+
+import os as _os
+
+# MJX on a deep kinematic chain is exponentially slow on XLA's CPU fusion emitters. The flag must be
+# in place before JAX creates its CPU backend, so it is set here, at import, appended to any flags.
+_FLAG = "--xla_cpu_use_fusion_emitters=false"
+if _FLAG not in _os.environ.get("XLA_FLAGS", ""):
+    _os.environ["XLA_FLAGS"] = (_os.environ.get("XLA_FLAGS", "") + " " + _FLAG).strip()
+
+import contextlib as _contextlib  # noqa: E402
+import io as _io  # noqa: E402
+
+# mujoco.mjx prints a notice when the optional MJX-Warp backend is absent; keep stdout clean.
+with _contextlib.redirect_stdout(_io.StringIO()):
+    from mujoco import mjx as _mjx  # noqa: E402, F401
+
+from mjx_arm.arm import (  # noqa: E402
+    Arm,
+    ModelValidationError,
+    SimulationDivergedError,
+    check_pressures,
+    load,
+    validate_model,
+)
+from mjx_arm.constants import (  # noqa: E402
+    CHAMBER_ACTUATORS,
+    CONTROL_HZ,
+    P_MAX_BAR,
+    P_MIN_BAR,
+    TIP_SITE,
+)
+from mjx_arm.domains import CONSTRAINED, DOMAINS, SOURCE, Domain  # noqa: E402
+
+
+def __getattr__(name):
+    # Lazy, so `python -m mjx_arm.model_gen` does not import its own module twice.
+    if name in ("ArmParams", "generate_xml"):
+        from mjx_arm import model_gen
+
+        return getattr(model_gen, name)
+    raise AttributeError(f"module 'mjx_arm' has no attribute {name!r}")
+
+
+__all__ = [
+    "Arm",
+    "ArmParams",
+    "CHAMBER_ACTUATORS",
+    "CONSTRAINED",
+    "CONTROL_HZ",
+    "DOMAINS",
+    "Domain",
+    "ModelValidationError",
+    "P_MAX_BAR",
+    "P_MIN_BAR",
+    "SOURCE",
+    "SimulationDivergedError",
+    "TIP_SITE",
+    "check_pressures",
+    "generate_xml",
+    "load",
+    "validate_model",
+]

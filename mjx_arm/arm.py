@@ -1,0 +1,455 @@
+"""Load an arm model, put it in a domain, and roll out pressure programs in MJX or MuJoCo C.
+
+A pressure program is a sequence of chamber commands (bar) at 10 Hz. Each command is held for one
+control period; the valves lag toward it (`mjx_arm.valve`); the pose is read once per period. Both
+backends start from the same rest state and apply identical per-substep pressures.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import functools
+import hashlib
+import math
+import os
+from pathlib import Path
+
+import jax
+import jax.numpy as jnp
+import mujoco
+import numpy as np
+from mujoco import mjx
+from mujoco import rollout as mj_rollout
+
+from mjx_arm import constants, domains, valve
+
+# Pose layout: tip position (m, world frame, base at the origin) then the unit d3 director.
+POSE_DIM = 6
+#: A trajectory whose joint speed exceeds this (rad/s or m/s) is treated as diverged.
+MAX_JOINT_SPEED = 1.0e3
+
+
+class ModelValidationError(ValueError):
+    """An MJCF lacks what the arm API needs."""
+
+
+class SimulationDivergedError(RuntimeError):
+    """A rollout produced a non-finite or exploding state."""
+
+    def __init__(self, message: str, trajectories: np.ndarray, first_step: np.ndarray):
+        super().__init__(message)
+        self.trajectories = trajectories
+        self.first_step = first_step
+
+
+def _custom_numeric(mj_model: mujoco.MjModel, name: str, default: float) -> float:
+    for i in range(mj_model.nnumeric):
+        if mujoco.mj_id2name(mj_model, mujoco.mjtObj.mjOBJ_NUMERIC, i) == name:
+            return float(mj_model.numeric_data[mj_model.numeric_adr[i]])
+    return default
+
+
+def validate_model(mj_model: mujoco.MjModel, source: str = "model") -> None:
+    """Checks that `mj_model` names what the API needs.
+
+    Raises:
+      ModelValidationError: listing every missing or unusable element.
+    """
+    problems = []
+    actuators = {mj_model.actuator(i).name for i in range(mj_model.nu)}
+    missing = [name for name in constants.CHAMBER_ACTUATORS if name not in actuators]
+    if missing:
+        problems.append(f"actuators {missing}")
+    sites = {mj_model.site(i).name for i in range(mj_model.nsite)}
+    if constants.TIP_SITE not in sites:
+        problems.append(f"site {constants.TIP_SITE!r}")
+    if problems:
+        raise ModelValidationError(
+            f"{source} is missing " + " and ".join(problems) + ". An arm model must name the"
+            f" chamber actuators {list(constants.CHAMBER_ACTUATORS)} and the tip site"
+            f" {constants.TIP_SITE!r}."
+        )
+    period = constants.CONTROL_PERIOD_S / mj_model.opt.timestep
+    if abs(period - round(period)) > 1e-6:
+        raise ModelValidationError(
+            f"{source}: timestep {mj_model.opt.timestep} s does not divide the"
+            f" {constants.CONTROL_PERIOD_S} s control period"
+        )
+    if mj_model.opt.integrator not in (
+        mujoco.mjtIntegrator.mjINT_EULER,
+        mujoco.mjtIntegrator.mjINT_RK4,
+    ):
+        raise ModelValidationError(
+            f"{source}: MJX supports fluid drag only with the Euler or RK4 integrator"
+        )
+
+
+def check_pressures(pressures_bar) -> np.ndarray:
+    """Checks a pressure program's shape and finiteness.
+
+    Args:
+      pressures_bar: [T, 3] or [B, T, 3] commands (bar).
+
+    Returns:
+      The program as a float array [B, T, 3] (B = 1 for a single program).
+
+    Raises:
+      ValueError: wrong shape, or a non-finite value (the message names where).
+    """
+    p = np.asarray(pressures_bar, dtype=np.float64)
+    if p.ndim not in (2, 3) or p.shape[-1] != 3 or p.shape[-2] == 0:
+        raise ValueError(f"pressures_bar must be [T, 3] or [B, T, 3] with T > 0, got {p.shape}")
+    batched = p if p.ndim == 3 else p[None]
+    bad = ~np.isfinite(batched)
+    if bad.any():
+        where = np.argwhere(bad)
+        b, t, c = where[0]
+        at = f"trajectory {b}, " if p.ndim == 3 else ""
+        raise ValueError(
+            f"pressures_bar has {len(where)} non-finite value(s); first at {at}step {t},"
+            f" chamber {c} (value {batched[b, t, c]})"
+        )
+    return batched
+
+
+@dataclasses.dataclass
+class Arm:
+    """An arm model in one domain, with MJX and MuJoCo C rollouts.
+
+    Attributes:
+      mj_model: the MuJoCo model with the domain applied.
+      domain: the domain.
+      path: where the MJCF came from (None for a string).
+      n_substeps: physics steps per 0.1 s control period.
+      valve: the valve constants (read from the MJCF's <custom> numerics when present).
+      rest_qpos, rest_qvel: the rest state every rollout starts from (chambers at p_min).
+      inertia_scale: the numerical mass scaling the domain applied (1.0 when none).
+    """
+
+    mj_model: mujoco.MjModel
+    domain: domains.Domain
+    path: Path | None
+    n_substeps: int
+    valve: valve.ValveParams
+    rest_qpos: np.ndarray
+    rest_qvel: np.ndarray
+    inertia_scale: float
+    model_hash: str
+
+    @functools.cached_property
+    def mjx_model(self) -> mjx.Model:
+        return mjx.put_model(self.mj_model)
+
+    @property
+    def timestep_s(self) -> float:
+        return float(self.mj_model.opt.timestep)
+
+    @property
+    def tip_site_id(self) -> int:
+        return self.mj_model.site(constants.TIP_SITE).id
+
+    @property
+    def actuator_ids(self) -> np.ndarray:
+        return np.array([self.mj_model.actuator(n).id for n in constants.CHAMBER_ACTUATORS])
+
+    # ------------------------------------------------------------------ rollouts
+
+    def rollout(self, pressures_bar, backend: str = "mjx") -> np.ndarray:
+        """Simulates pressure programs from rest and returns the tip pose after each command.
+
+        Commands outside [0, 3.5] bar saturate like a real valve; commands under the valve floor
+        (0.2 bar) act as the floor. The pose of each period is read at its last physics step.
+
+        Args:
+          pressures_bar: [T, 3] or [B, T, 3] chamber commands (bar) at 10 Hz.
+          backend: "mjx" (JAX, jitted, vmapped over B) or "c" (MuJoCo C `mujoco.rollout`,
+            multi-threaded over B).
+
+        Returns:
+          [T, 6] or [B, T, 6] float64 poses: tip position (m) then unit d3.
+
+        Raises:
+          ValueError: bad shape or non-finite pressures.
+          SimulationDivergedError: a trajectory's state became non-finite or exploded.
+        """
+        batched = check_pressures(pressures_bar)
+        if backend == "mjx":
+            poses, ok = self._rollout_mjx(batched)
+        elif backend == "c":
+            poses, ok = self._rollout_c(batched)
+        else:
+            raise ValueError(f"backend must be 'mjx' or 'c', got {backend!r}")
+        _raise_if_diverged(ok)
+        return poses if np.ndim(pressures_bar) == 3 else poses[0]
+
+    def rollout_fn(self):
+        """The pure JAX rollout: `fn(mjx_model, commands [T, 3] bar) -> (poses [T, 6], ok [T])`.
+
+        Jit it, vmap it over programs (or over model fields), differentiate through it. `ok[t]` is
+        False once the state is non-finite or exploding; callers must check it.
+        """
+        return functools.partial(
+            _rollout_single,
+            tip_site=self.tip_site_id,
+            actuators=tuple(int(i) for i in self.actuator_ids),
+            n_substeps=self.n_substeps,
+            valve_params=self.valve,
+            rest_qpos=jnp.asarray(self.rest_qpos),
+            rest_qvel=jnp.asarray(self.rest_qvel),
+        )
+
+    @functools.cached_property
+    def _jit_batched(self):
+        return jax.jit(jax.vmap(self.rollout_fn(), in_axes=(None, 0)))
+
+    def _rollout_mjx(self, batched: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        commands = jnp.asarray(batched, dtype=jnp.float32)
+        poses, ok = self._jit_batched(self.mjx_model, commands)
+        return np.asarray(poses, dtype=np.float64), np.asarray(ok)
+
+    def _rollout_c(self, batched: np.ndarray, chunk_periods: int = 50):
+        m = self.mj_model
+        n_batch, n_periods, _ = batched.shape
+        spec = mujoco.mjtState.mjSTATE_FULLPHYSICS
+        data = mujoco.MjData(m)
+        data.qpos[:], data.qvel[:] = self.rest_qpos, self.rest_qvel
+        data.act[:] = 0.0
+        state = np.zeros((n_batch, mujoco.mj_stateSize(m, spec)))
+        mujoco.mj_getState(m, data, state[0], spec)
+        state[:] = state[0]
+        pressure = np.full((n_batch, 3), self.valve.p_min_bar)
+        commands = np.asarray(valve.saturate(batched, self.valve))
+        poses = np.zeros((n_batch, n_periods, POSE_DIM))
+        ok = np.ones((n_batch, n_periods), dtype=bool)
+        nthread = min(os.cpu_count() or 1, n_batch)
+        datas = [mujoco.MjData(m) for _ in range(nthread)]
+        sensor_pos = m.sensor("tip_pos").adr[0] if _has_sensor(m, "tip_pos") else None
+        with mj_rollout.Rollout(nthread=nthread) as pool:
+            for start in range(0, n_periods, chunk_periods):
+                stop = min(start + chunk_periods, n_periods)
+                ctrl = _chunk_controls(pressure, commands[:, start:stop], self, m.nu)
+                pressure = ctrl[:, -1, self.actuator_ids]
+                out_state, sensordata = pool.rollout(
+                    m,
+                    datas,
+                    state,
+                    ctrl,
+                    nstep=ctrl.shape[1],
+                    control_spec=mujoco.mjtState.mjSTATE_CTRL,
+                )
+                times = out_state[:, :, 0]
+                expected = state[:, :1] + self.timestep_s * np.arange(1, ctrl.shape[1] + 1)
+                fine = np.isfinite(out_state).all(-1) & np.isclose(times, expected, atol=1e-6)
+                last = out_state[:, self.n_substeps - 1 :: self.n_substeps]
+                ok[:, start:stop] = fine[:, self.n_substeps - 1 :: self.n_substeps]
+                if sensor_pos is not None:
+                    sd = sensordata[:, self.n_substeps - 1 :: self.n_substeps]
+                    poses[:, start:stop] = sd[..., sensor_pos : sensor_pos + POSE_DIM]
+                else:
+                    poses[:, start:stop] = self._poses_from_states(last)
+                state = out_state[:, -1].copy()
+        # Once diverged, stay diverged (MuJoCo C resets the state after a bad step).
+        ok = np.logical_and.accumulate(ok, axis=1)
+        return poses, ok
+
+    def _poses_from_states(self, states: np.ndarray) -> np.ndarray:
+        """Poses [..., 6] of full-physics states [..., nstate], via forward kinematics."""
+        m = self.mj_model
+        data = mujoco.MjData(m)
+        flat = states.reshape(-1, states.shape[-1])
+        out = np.zeros((flat.shape[0], POSE_DIM))
+        spec = mujoco.mjtState.mjSTATE_FULLPHYSICS
+        for i, s in enumerate(flat):
+            mujoco.mj_setState(m, data, s, spec)
+            mujoco.mj_kinematics(m, data)
+            out[i, :3] = data.site_xpos[self.tip_site_id]
+            out[i, 3:] = data.site_xmat[self.tip_site_id].reshape(3, 3)[:, 2]
+        return out.reshape(states.shape[:-1] + (POSE_DIM,))
+
+    def rest_pose(self) -> np.ndarray:
+        """The tip pose [6] at rest."""
+        data = mujoco.MjData(self.mj_model)
+        data.qpos[:] = self.rest_qpos
+        mujoco.mj_kinematics(self.mj_model, data)
+        return np.concatenate(
+            [data.site_xpos[self.tip_site_id], data.site_xmat[self.tip_site_id].reshape(3, 3)[:, 2]]
+        )
+
+
+def _has_sensor(m: mujoco.MjModel, name: str) -> bool:
+    try:
+        m.sensor(name)
+    except KeyError:
+        return False
+    # The fast path needs framepos then framezaxis of the tip site, adjacent in sensordata.
+    pos, d3 = m.sensor(name), None
+    try:
+        d3 = m.sensor("tip_d3")
+    except KeyError:
+        return False
+    return (
+        pos.type[0] == mujoco.mjtSensor.mjSENS_FRAMEPOS
+        and d3.type[0] == mujoco.mjtSensor.mjSENS_FRAMEZAXIS
+        and d3.adr[0] == pos.adr[0] + 3
+        and pos.objid[0] == m.site(constants.TIP_SITE).id
+        and d3.objid[0] == pos.objid[0]
+    )
+
+
+def _chunk_controls(pressure, commands, arm: Arm, nu: int) -> np.ndarray:
+    """Per-substep controls [B, periods * n_substeps, nu] for held commands [B, periods, 3]."""
+    n_batch, periods, _ = commands.shape
+    sub = np.zeros((n_batch, periods, arm.n_substeps, 3))
+    p = np.asarray(pressure, dtype=np.float64)
+    for k in range(periods):
+        sub[:, k] = np.moveaxis(
+            np.asarray(
+                valve.substep_pressures(
+                    jnp.asarray(p),
+                    jnp.asarray(commands[:, k]),
+                    arm.n_substeps,
+                    arm.timestep_s,
+                    arm.valve,
+                )
+            ),
+            0,
+            1,
+        )
+        p = sub[:, k, -1]
+    ctrl = np.zeros((n_batch, periods * arm.n_substeps, nu))
+    ctrl[..., arm.actuator_ids] = sub.reshape(n_batch, -1, 3)
+    return ctrl
+
+
+def _rollout_single(
+    mjx_model: mjx.Model,
+    commands_bar: jnp.ndarray,
+    *,
+    tip_site: int,
+    actuators: tuple[int, ...],
+    n_substeps: int,
+    valve_params: valve.ValveParams,
+    rest_qpos: jnp.ndarray,
+    rest_qvel: jnp.ndarray,
+):
+    """One program [T, 3] (bar) -> poses [T, 6] and ok flags [T]; see Arm.rollout_fn."""
+    dtype = commands_bar.dtype
+    data = mjx.make_data(mjx_model)
+    data = data.replace(qpos=rest_qpos.astype(dtype), qvel=rest_qvel.astype(dtype))
+    actuators = jnp.asarray(actuators)
+    timestep = mjx_model.opt.timestep
+    p0 = jnp.full((3,), valve_params.p_min_bar, dtype)
+    commands = valve.saturate(commands_bar, valve_params)
+
+    def physics_step(data, pressure):
+        data = data.replace(ctrl=data.ctrl.at[actuators].set(pressure))
+        return mjx.step(mjx_model, data), None
+
+    def control_step(carry, command):
+        data, pressure, healthy = carry
+        pressures = valve.substep_pressures(pressure, command, n_substeps, timestep, valve_params)
+        data, _ = jax.lax.scan(physics_step, data, pressures)
+        pose = jnp.concatenate([data.site_xpos[tip_site], data.site_xmat[tip_site][:, 2]])
+        finite = jnp.isfinite(data.qpos).all() & jnp.isfinite(data.qvel).all()
+        healthy = healthy & finite & (jnp.abs(data.qvel).max() < MAX_JOINT_SPEED)
+        return (data, pressures[-1], healthy), (pose, healthy)
+
+    _, (poses, ok) = jax.lax.scan(control_step, (data, p0, jnp.array(True)), commands)
+    return poses, ok
+
+
+def _raise_if_diverged(ok: np.ndarray) -> None:
+    """ok: [B, T] flags."""
+    bad = ~ok[:, -1]
+    if bad.any():
+        trajectories = np.flatnonzero(bad)
+        first_step = np.array([np.argmin(ok[b]) for b in trajectories])
+        raise SimulationDivergedError(
+            f"simulation diverged (non-finite or exploding state) in {len(trajectories)}"
+            f" trajectory(ies): {trajectories[:10].tolist()}, first at control step(s)"
+            f" {first_step[:10].tolist()}. Lower the timestep or raise Domain.inertia_scale.",
+            trajectories,
+            first_step,
+        )
+
+
+def _settle(m: mujoco.MjModel, p_min: float, max_time_s: float = 60.0) -> tuple[np.ndarray, ...]:
+    """Rest state: chambers at the valve floor, stepped until the arm stops moving."""
+    data = mujoco.MjData(m)
+    ids = [m.actuator(n).id for n in constants.CHAMBER_ACTUATORS]
+    data.ctrl[ids] = p_min
+    steps_per_check = max(1, int(0.1 / m.opt.timestep))
+    for _ in range(int(max_time_s / 0.1)):
+        mujoco.mj_step(m, data, nstep=steps_per_check)
+        if not np.isfinite(data.qvel).all():
+            raise SimulationDivergedError(
+                "the model diverged while settling to rest", np.array([0]), np.array([0])
+            )
+        if np.abs(data.qvel).max() < 1e-7:
+            break
+    return data.qpos.copy(), np.zeros(m.nv)
+
+
+def load(
+    path: str | os.PathLike | None = None,
+    domain: str | domains.Domain = "source",
+    *,
+    xml: str | None = None,
+) -> Arm:
+    """Loads an arm model and puts it in a domain.
+
+    Args:
+      path: an MJCF file; None loads the committed `models/softarm.xml`.
+      domain: "source", "constrained", "aged", or a `Domain`.
+      xml: MJCF text instead of a path.
+
+    Returns:
+      An `Arm`, settled at rest.
+
+    Raises:
+      ModelValidationError: the MJCF does not name the chamber actuators and the tip site, or its
+        options do not suit the API.
+    """
+    domain = domains.resolve(domain)
+    if xml is not None:
+        source, text = "MJCF string", xml
+        mj_model = mujoco.MjModel.from_xml_string(xml)
+        model_path = None
+    else:
+        model_path = Path(path) if path is not None else constants.DEFAULT_MODEL_PATH
+        if not model_path.exists():
+            raise FileNotFoundError(f"no MJCF at {model_path}")
+        source, text = str(model_path), model_path.read_text()
+        try:
+            mj_model = mujoco.MjModel.from_xml_path(str(model_path))
+        except ValueError as err:
+            raise ModelValidationError(f"{model_path} does not compile: {err}") from err
+    validate_model(mj_model, source)
+    inertia_scale = domains.apply(mj_model, domain)
+    mujoco.mj_setConst(mj_model, mujoco.MjData(mj_model))
+    valve_params = valve.ValveParams(
+        tau_rise_s=_custom_numeric(mj_model, "valve_tau_rise", constants.VALVE_TAU_RISE_S),
+        tau_drop_s=_custom_numeric(mj_model, "valve_tau_drop", constants.VALVE_TAU_DROP_S),
+        p_min_bar=_custom_numeric(mj_model, "valve_p_min", constants.P_MIN_BAR),
+        p_max_bar=_custom_numeric(mj_model, "valve_p_max", constants.P_MAX_BAR),
+    )
+    rest_qpos, rest_qvel = _settle(mj_model, valve_params.p_min_bar)
+    return Arm(
+        mj_model=mj_model,
+        domain=domain,
+        path=model_path,
+        n_substeps=int(round(constants.CONTROL_PERIOD_S / mj_model.opt.timestep)),
+        valve=valve_params,
+        rest_qpos=rest_qpos,
+        rest_qvel=rest_qvel,
+        inertia_scale=inertia_scale,
+        model_hash=hashlib.sha256(text.encode()).hexdigest()[:16],
+    )
+
+
+def time_constant_63(times_s: np.ndarray, deflection: np.ndarray) -> float:
+    """Time (s) at which a monotone-ish step response first reaches 63.2% of its final value."""
+    final = deflection[-1]
+    if final <= 0 or not math.isfinite(final):
+        return float("nan")
+    return float(times_s[np.argmax(deflection >= (1 - math.exp(-1)) * final)])

@@ -1,0 +1,37 @@
+"""Names and fixed numbers that the MJCF model and the Python API share.
+
+Every element that Python touches is named here once; a foreign MJCF must use the same names.
+"""
+
+from pathlib import Path
+
+#: Repository root (the folder holding ``models/``).
+ROOT = Path(__file__).resolve().parent.parent
+#: The committed, generated arm model.
+DEFAULT_MODEL_PATH = ROOT / "models" / "softarm.xml"
+
+#: Actuators of the three chambers, at 0, 120 and 240 degrees around the arm's axis.
+CHAMBER_ACTUATORS = ("chamber_0", "chamber_1", "chamber_2")
+#: Site at the arm's free end; its z axis is the Cosserat d3 director (unit tangent).
+TIP_SITE = "tip"
+
+#: Control rate of the pressure programs (the paper's 10 Hz valves and sampling).
+CONTROL_HZ = 10.0
+CONTROL_PERIOD_S = 1.0 / CONTROL_HZ
+
+#: Valve limits (bar, gauge). Commands saturate to [0, P_MAX]; chambers never vent below P_MIN.
+P_MAX_BAR = 3.5
+P_MIN_BAR = 0.2
+#: First-order valve time constants (s): toward a higher command, toward a lower one.
+VALVE_TAU_RISE_S = 0.2
+VALVE_TAU_DROP_S = 0.56
+
+#: Names of the <custom><numeric> fields that carry valve data inside an MJCF.
+CUSTOM_VALVE_FIELDS = {
+    "valve_tau_rise": VALVE_TAU_RISE_S,
+    "valve_tau_drop": VALVE_TAU_DROP_S,
+    "valve_p_min": P_MIN_BAR,
+    "valve_p_max": P_MAX_BAR,
+}
+
+BAR_TO_PA = 1.0e5

@@ -1,0 +1,115 @@
+"""Domains: the medium and body changes that distinguish one arm world from another.
+
+A domain is data. It edits a compiled `mujoco.MjModel` (viscosity, stiffness, mass) so any MJCF that
+passes validation can be put in any domain.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import mujoco
+import numpy as np
+
+#: Explicit (Euler) fluid drag is stable while timestep * drag rate stays below 2; keep a margin.
+DRAG_STEP_MARGIN = 0.5
+
+
+@dataclasses.dataclass(frozen=True)
+class Domain:
+    """A world for the arm.
+
+    The built-in domains are `source` (D_s, the model's own medium) and `constrained` (D_c, the
+    medium ten times more viscous, as in the paper). Statics do not depend on viscosity, so both
+    hold the same pose under a held pressure; only the dynamics differ.
+    """
+
+    name: str = "custom"
+    """Label stored with datasets and results."""
+    viscosity: float | None = None
+    """Medium viscosity (Pa s); None keeps the MJCF's `<option viscosity>`."""
+    viscosity_scale: float = 1.0
+    """Multiplies the viscosity (after `viscosity` is applied)."""
+    stiffness_scale: float = 1.0
+    """Multiplies every joint stiffness (e.g. 0.7 for an aged, softer arm)."""
+    mass_scale: float = 1.0
+    """Multiplies every body mass and inertia (a physical change: gravity loads change too)."""
+    inertia_scale: float | None = None
+    """Numerical mass scaling (not physical): multiplies masses, inertias and armature and divides
+    gravity by the same factor, so gravity loads, statics and the overdamped response stay put
+    while explicit fluid drag becomes stable at the model's timestep. None picks the smallest
+    factor with timestep * drag rate <= DRAG_STEP_MARGIN. Use 1.0 to switch it off."""
+
+    def __post_init__(self):
+        for field in dataclasses.fields(self):
+            value = getattr(self, field.name)
+            if isinstance(value, float | int) and not isinstance(value, bool):
+                if not math.isfinite(value) or value <= 0:
+                    raise ValueError(f"Domain.{field.name} must be finite and > 0, got {value}")
+
+
+SOURCE = Domain(name="source")
+CONSTRAINED = Domain(name="constrained", viscosity_scale=10.0)
+AGED = Domain(name="aged", stiffness_scale=0.7, viscosity_scale=10.0)
+DOMAINS = {d.name: d for d in (SOURCE, CONSTRAINED, AGED)}
+
+
+def resolve(domain: str | Domain) -> Domain:
+    """Returns the Domain named `domain`, or `domain` itself."""
+    if isinstance(domain, Domain):
+        return domain
+    try:
+        return DOMAINS[domain]
+    except KeyError:
+        raise ValueError(f"unknown domain {domain!r}; built-in: {sorted(DOMAINS)}") from None
+
+
+def drag_rate_per_s(mj_model: mujoco.MjModel) -> float:
+    """Largest translational viscous drag rate (1/s) of any body under MuJoCo's inertia-box model.
+
+    The box of each body is the one with the body's inertia; the viscous force is
+    3 pi mu d v with d the mean box side, so the velocity relaxes at 3 pi mu d / m.
+    """
+    rates = [0.0]
+    for body in range(1, mj_model.nbody):
+        mass = mj_model.body_mass[body]
+        if mass <= 0:
+            continue
+        ixx, iyy, izz = mj_model.body_inertia[body]
+        sides = np.sqrt(
+            np.maximum(
+                6.0 / mass * np.array([iyy + izz - ixx, ixx + izz - iyy, ixx + iyy - izz]), 0.0
+            )
+        )
+        diameter = float(sides.mean())
+        rates.append(3.0 * math.pi * mj_model.opt.viscosity * diameter / mass)
+    return max(rates)
+
+
+def apply(mj_model: mujoco.MjModel, domain: Domain) -> float:
+    """Edits `mj_model` in place to put it in `domain`.
+
+    Returns:
+      The inertia scale applied (1.0 when none).
+    """
+    m = mj_model
+    if domain.viscosity is not None:
+        m.opt.viscosity = domain.viscosity
+    m.opt.viscosity *= domain.viscosity_scale
+    if m.opt.viscosity <= 0 and m.opt.density <= 0:
+        raise ValueError("the domain's medium has zero viscosity and density: MJX drops fluid code")
+    m.jnt_stiffness[:] *= domain.stiffness_scale
+    m.body_mass[:] *= domain.mass_scale
+    m.body_inertia[:] *= domain.mass_scale
+
+    scale = domain.inertia_scale
+    if scale is None:
+        scale = max(1.0, m.opt.timestep * drag_rate_per_s(m) / DRAG_STEP_MARGIN)
+    if scale != 1.0:
+        m.body_mass[:] *= scale
+        m.body_inertia[:] *= scale
+        m.dof_armature[:] *= scale
+        m.opt.gravity[:] /= scale
+        # Actuator and spring forces are unchanged, so statics are unchanged; gravity compensates.
+    return float(scale)

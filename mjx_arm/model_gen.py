@@ -1,0 +1,339 @@
+"""Generate ``models/softarm.xml`` from one physical-parameter dataclass.
+
+The arm is a chain of rigid capsule segments hanging from a fixed base. Each segment carries a ball
+joint (bend and twist) and a slide joint (stretch) at its top, with stiffness derived from the rod's
+E, A, I over the segment length. Three chambers are spatial tendons through sites 20 mm off the axis;
+a positive actuator force on a tendon lengthens it, as a pressurised chamber pushes its end caps apart.
+
+Run ``python -m mjx_arm.model_gen`` to rewrite the committed model; ``--check`` only compares.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import math
+import sys
+from pathlib import Path
+
+from mjx_arm import constants
+
+
+@dataclasses.dataclass(frozen=True)
+class ArmParams:
+    """Physical and numerical parameters of the arm model.
+
+    Sources: [paper] Kushawaha et al., "Domain Translation of a Soft Robotic Arm using Conditional
+    Cycle GAN"; [code] the authors' public `utils/i_supportModelParam.py`; [calib] measured here by
+    `python -m mjx_arm.calibrate` (see its docstring); [choice] a modelling choice explained inline.
+    """
+
+    length_m: float = 0.2
+    """Arm length (m) [paper: ~0.202 m; code: 0.19 m]."""
+    radius_m: float = 0.03
+    """Cross-section radius (m) [paper, code]."""
+    mass_kg: float = 0.183
+    """Total mass (kg) [paper: 183 g]."""
+    youngs_modulus_pa: float = 1.646439e6
+    """Young's modulus E (Pa) [code]."""
+    poisson_ratio: float = 0.5
+    """Poisson ratio, so G = E / 3 [code]."""
+    chamber_length_m: float = 0.18
+    """Length of the pressure chambers from the base (m) [paper: ~180 mm]."""
+    chamber_offset_m: float = 0.02
+    """Chamber centre distance from the arm's axis (m) [paper, code]."""
+    chamber_outer_radius_m: float = 0.00779
+    """Chamber tube outer radius (m) [code]."""
+    chamber_wall_m: float = 0.0014
+    """Chamber tube wall thickness (m) [code]."""
+    gravity_mps2: float = 9.80513
+    """Gravity (m/s^2), the arm hangs along -z [code]."""
+    n_segments: int = 10
+    """Rigid segments in the chain [choice: measured trade-off, see bench/ and README]."""
+    timestep_s: float = 0.002
+    """Physics timestep (s) [choice: largest stable step for both domains, see calibrate]."""
+    viscosity_pa_s: float = 90.0
+    """Fluid viscosity of the source domain's medium (Pa s) [calib: step response]."""
+    bend_armature_scale: float = 4.0
+    """Joint armature of each ball joint, as a multiple of the segment's own rotational inertia
+    about its top [choice: slows only the segment-local modes so explicit drag stays stable at
+    `timestep_s`; the overdamped bending response is set by stiffness and drag, not inertia]."""
+    stretch_armature_scale: float = 4.0
+    """Slide-joint armature as a multiple of the segment mass [choice: as above, axial mode]."""
+    stretch_damping_ratio: float = 1.0
+    """Damping ratio of each slide joint's own axial mode [choice: the rod's internal losses; only
+    damps the fast axial oscillation, which the paper's model does not resolve at 10 Hz]."""
+
+    @property
+    def segment_length_m(self) -> float:
+        return self.length_m / self.n_segments
+
+    @property
+    def segment_mass_kg(self) -> float:
+        return self.mass_kg / self.n_segments
+
+    @property
+    def shear_modulus_pa(self) -> float:
+        return self.youngs_modulus_pa / (2.0 * (1.0 + self.poisson_ratio))
+
+    @property
+    def area_m2(self) -> float:
+        return math.pi * self.radius_m**2
+
+    @property
+    def second_moment_m4(self) -> float:
+        return math.pi * self.radius_m**4 / 4.0
+
+    @property
+    def bend_stiffness_nm_per_rad(self) -> float:
+        """E I / l: one joint stands for one segment length of rod."""
+        return self.youngs_modulus_pa * self.second_moment_m4 / self.segment_length_m
+
+    @property
+    def twist_stiffness_nm_per_rad(self) -> float:
+        """G J / l (J = 2 I). Reported only: MuJoCo's ball-joint spring is isotropic."""
+        return self.shear_modulus_pa * 2.0 * self.second_moment_m4 / self.segment_length_m
+
+    @property
+    def stretch_stiffness_n_per_m(self) -> float:
+        return self.youngs_modulus_pa * self.area_m2 / self.segment_length_m
+
+    @property
+    def chamber_area_m2(self) -> float:
+        """Effective area: the chamber lumen, on which pressure pushes the end cap."""
+        inner = self.chamber_outer_radius_m - self.chamber_wall_m
+        return math.pi * inner**2
+
+    @property
+    def segment_inertia_kgm2(self) -> tuple[float, float, float]:
+        """Solid-cylinder inertia of one segment about its centre of mass (x, y, z)."""
+        m, r, l = self.segment_mass_kg, self.radius_m, self.segment_length_m
+        transverse = m * (3.0 * r**2 + l**2) / 12.0
+        return (transverse, transverse, m * r**2 / 2.0)
+
+    @property
+    def bend_armature_kgm2(self) -> float:
+        transverse = self.segment_inertia_kgm2[0]
+        about_top = transverse + self.segment_mass_kg * (self.segment_length_m / 2.0) ** 2
+        return self.bend_armature_scale * about_top
+
+    @property
+    def stretch_armature_kg(self) -> float:
+        return self.stretch_armature_scale * self.segment_mass_kg
+
+    @property
+    def stretch_damping_ns_per_m(self) -> float:
+        moving_mass = self.segment_mass_kg + self.stretch_armature_kg
+        return (
+            2.0
+            * self.stretch_damping_ratio
+            * math.sqrt(self.stretch_stiffness_n_per_m * moving_mass)
+        )
+
+    def validate(self) -> None:
+        """Raises ValueError for parameters that cannot make a model."""
+        if self.n_segments < 2:
+            raise ValueError(f"n_segments must be >= 2, got {self.n_segments}")
+        if not 0.0 < self.chamber_length_m <= self.length_m:
+            raise ValueError("chamber_length_m must lie in (0, length_m]")
+        for field in dataclasses.fields(self):
+            value = getattr(self, field.name)
+            if isinstance(value, float) and not math.isfinite(value):
+                raise ValueError(f"{field.name} must be finite, got {value}")
+        positive = ("length_m", "radius_m", "mass_kg", "youngs_modulus_pa", "timestep_s")
+        for name in positive + ("viscosity_pa_s",):
+            if getattr(self, name) <= 0.0:
+                raise ValueError(f"{name} must be > 0 (a zero viscosity drops MJX's fluid code)")
+
+
+def _f(x: float) -> str:
+    """Formats a number compactly and reproducibly."""
+    return f"{x:.6g}"
+
+
+def _chamber_sites(params: ArmParams) -> list[list[tuple[int, float]]]:
+    """For each segment, the local z (m, <= 0) of chamber sites it carries.
+
+    Sites sit at the bottom of every segment that ends inside the chamber, plus one where the
+    chamber ends. Returned as a list over segments of (segment index, local z) pairs.
+    """
+    seg = params.segment_length_m
+    sites: list[list[tuple[int, float]]] = [[] for _ in range(params.n_segments)]
+    eps = 1e-9
+    for i in range(params.n_segments):
+        bottom = (i + 1) * seg
+        if bottom <= params.chamber_length_m + eps:
+            sites[i].append((i, -seg))
+    end_segment = min(int((params.chamber_length_m - eps) // seg), params.n_segments - 1)
+    end_local = -(params.chamber_length_m - end_segment * seg)
+    if not sites[end_segment] or abs(sites[end_segment][-1][1] - end_local) > eps:
+        sites[end_segment].append((end_segment, end_local))
+    return sites
+
+
+def generate_xml(params: ArmParams = ArmParams()) -> str:
+    """Returns the MJCF text of the arm described by `params`."""
+    params.validate()
+    p = params
+    seg = p.segment_length_m
+    inertia = p.segment_inertia_kgm2
+    angles = [2.0 * math.pi * k / 3.0 for k in range(3)]
+    offsets = [(p.chamber_offset_m * math.cos(a), p.chamber_offset_m * math.sin(a)) for a in angles]
+    gain = p.chamber_area_m2 * constants.BAR_TO_PA
+    sites_per_segment = _chamber_sites(p)
+
+    header = f"""<!--
+  Soft pneumatic arm (I-Support module) as a chain of {p.n_segments} rigid segments.
+  GENERATED by `python -m mjx_arm.model_gen` from mjx_arm.model_gen.ArmParams: do not edit by hand.
+
+  Sources: [paper] Kushawaha et al., Domain Translation of a Soft Robotic Arm using CCGAN;
+  [code] the authors' utils/i_supportModelParam.py; [calib] mjx_arm.calibrate; [choice] see ArmParams.
+    length {_f(p.length_m)} m [paper ~0.202, code 0.19], radius {_f(p.radius_m)} m [paper, code],
+    mass {_f(p.mass_kg)} kg [paper 183 g], E {_f(p.youngs_modulus_pa)} Pa [code],
+    Poisson {_f(p.poisson_ratio)} so G = {_f(p.shear_modulus_pa)} Pa [code],
+    gravity {_f(p.gravity_mps2)} m/s^2 [code].
+  Per segment (l = {_f(seg)} m, m = {_f(p.segment_mass_kg)} kg, solid-cylinder inertia):
+    ball-joint stiffness E*I/l = {_f(p.bend_stiffness_nm_per_rad)} N m/rad (I = pi r^4/4);
+      MuJoCo's ball spring is isotropic, so twist uses E*I/l, not G*J/l = \
+{_f(p.twist_stiffness_nm_per_rad)} [choice];
+    slide-joint stiffness E*A/l = {_f(p.stretch_stiffness_n_per_m)} N/m (A = pi r^2);
+    armature: ball {_f(p.bend_armature_kgm2)} kg m^2, slide {_f(p.stretch_armature_kg)} kg,
+      slide damping {_f(p.stretch_damping_ns_per_m)} N s/m [choice, see ArmParams].
+  Chambers: 3 spatial tendons, {_f(p.chamber_offset_m)} m off the axis at 0/120/240 deg
+    [paper, code], {_f(p.chamber_length_m)} m long [paper]; force = pressure x lumen area
+    pi (r_out - wall)^2 = {_f(p.chamber_area_m2)} m^2 [code geometry], so gain
+    {_f(gain)} N/bar; ctrl is the chamber pressure in bar, 0..{_f(constants.P_MAX_BAR)} [paper].
+  Valves: first order toward the command, tau rise {_f(constants.VALVE_TAU_RISE_S)} s,
+    drop {_f(constants.VALVE_TAU_DROP_S)} s, floor {_f(constants.P_MIN_BAR)} bar [paper, code].
+    MuJoCo's filter dynamics has one time constant, so mjx_arm.valve applies the valve and
+    these numbers travel in <custom>.
+  Medium: viscosity {_f(p.viscosity_pa_s)} Pa s for the source domain [calib]; the constrained
+    domain scales it by 10 [paper]. Integrator Euler (MJX has no implicitfast with fluid drag),
+    timestep {_f(p.timestep_s)} s [choice], dense Jacobians, contacts off (the arm touches nothing).
+-->
+"""
+    lines = [header.rstrip("\n"), '<mujoco model="softarm">']
+    lines.append('  <compiler angle="radian" autolimits="true"/>')
+    lines.append(
+        f'  <option timestep="{_f(p.timestep_s)}" integrator="Euler" jacobian="dense"'
+        f' gravity="0 0 {_f(-p.gravity_mps2)}" viscosity="{_f(p.viscosity_pa_s)}" density="0">'
+    )
+    lines.append('    <flag contact="disable"/>')
+    lines.append("  </option>")
+    lines.append("  <custom>")
+    for name, value in constants.CUSTOM_VALVE_FIELDS.items():
+        lines.append(f'    <numeric name="{name}" data="{_f(value)}"/>')
+    lines.append("  </custom>")
+    lines.append("  <visual>")
+    lines.append('    <global offwidth="1280" offheight="720"/>')
+    lines.append("  </visual>")
+    lines.append("  <default>")
+    lines.append('    <default class="segment">')
+    lines.append(
+        f'      <geom type="capsule" size="{_f(p.radius_m)}" contype="0" conaffinity="0"'
+        ' rgba="0.85 0.55 0.35 1"/>'
+    )
+    lines.append('      <site type="sphere" size="0.002" rgba="0.2 0.4 0.9 1"/>')
+    lines.append('      <default class="bend">')
+    lines.append(
+        f'        <joint type="ball" stiffness="{_f(p.bend_stiffness_nm_per_rad)}"'
+        f' armature="{_f(p.bend_armature_kgm2)}"/>'
+    )
+    lines.append("      </default>")
+    lines.append('      <default class="stretch">')
+    lines.append(
+        f'        <joint type="slide" axis="0 0 -1" stiffness="{_f(p.stretch_stiffness_n_per_m)}"'
+        f' damping="{_f(p.stretch_damping_ns_per_m)}" armature="{_f(p.stretch_armature_kg)}"/>'
+    )
+    lines.append("      </default>")
+    lines.append("    </default>")
+    lines.append('    <default class="chamber">')
+    lines.append(
+        f'      <general gainprm="{_f(gain)}" ctrlrange="0 {_f(constants.P_MAX_BAR)}"'
+        ' dyntype="none" biastype="none"/>'
+    )
+    lines.append("    </default>")
+    lines.append("  </default>")
+    lines.append("  <worldbody>")
+    lines.append('    <light pos="0 -0.6 0.4" dir="0 1 -0.6" directional="true"/>')
+    lines.append(
+        '    <geom name="mount" type="box" size="0.05 0.05 0.005" pos="0 0 0.005"'
+        ' contype="0" conaffinity="0" rgba="0.3 0.3 0.3 1"/>'
+    )
+    for k, (x, y) in enumerate(offsets):
+        lines.append(f'    <site name="chamber_{k}_base" pos="{_f(x)} {_f(y)} 0" size="0.002"/>')
+
+    indent = "    "
+    for i in range(p.n_segments):
+        pos = "0 0 0" if i == 0 else f"0 0 {_f(-seg)}"
+        lines.append(f'{indent}<body name="seg_{i}" pos="{pos}" childclass="segment">')
+        inner = indent + "  "
+        lines.append(f'{inner}<joint name="bend_{i}" class="bend"/>')
+        lines.append(f'{inner}<joint name="stretch_{i}" class="stretch"/>')
+        lines.append(
+            f'{inner}<inertial pos="0 0 {_f(-seg / 2)}" mass="{_f(p.segment_mass_kg)}"'
+            f' diaginertia="{_f(inertia[0])} {_f(inertia[1])} {_f(inertia[2])}"/>'
+        )
+        lines.append(f'{inner}<geom name="seg_{i}" fromto="0 0 0 0 0 {_f(-seg)}"/>')
+        for j, (_, local_z) in enumerate(sites_per_segment[i]):
+            for k, (x, y) in enumerate(offsets):
+                lines.append(
+                    f'{inner}<site name="chamber_{k}_s{i}_{j}" pos="{_f(x)} {_f(y)} {_f(local_z)}"/>'
+                )
+        if i == p.n_segments - 1:
+            # quat (0 1 0 0) turns the site half a turn about x, so its z axis points down the arm.
+            lines.append(
+                f'{inner}<site name="{constants.TIP_SITE}" pos="0 0 {_f(-seg)}" quat="0 1 0 0"'
+                ' size="0.004" rgba="0.9 0.1 0.1 1"/>'
+            )
+        indent = inner
+    for i in reversed(range(p.n_segments)):
+        indent = indent[:-2]
+        lines.append(f"{indent}</body>")
+    lines.append("  </worldbody>")
+
+    lines.append("  <tendon>")
+    for k in range(3):
+        lines.append(f'    <spatial name="chamber_{k}" width="0.003" rgba="0.2 0.4 0.9 0.6">')
+        lines.append(f'      <site site="chamber_{k}_base"/>')
+        for i in range(p.n_segments):
+            for j, _ in enumerate(sites_per_segment[i]):
+                lines.append(f'      <site site="chamber_{k}_s{i}_{j}"/>')
+        lines.append("    </spatial>")
+    lines.append("  </tendon>")
+
+    lines.append("  <actuator>")
+    for name in constants.CHAMBER_ACTUATORS:
+        lines.append(f'    <general name="{name}" tendon="{name}" class="chamber"/>')
+    lines.append("  </actuator>")
+
+    lines.append("  <sensor>")
+    lines.append(f'    <framepos name="tip_pos" objtype="site" objname="{constants.TIP_SITE}"/>')
+    lines.append(f'    <framezaxis name="tip_d3" objtype="site" objname="{constants.TIP_SITE}"/>')
+    lines.append("  </sensor>")
+    lines.append("</mujoco>")
+    return "\n".join(lines) + "\n"
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--out", type=Path, default=constants.DEFAULT_MODEL_PATH)
+    parser.add_argument("--segments", type=int, default=None, help="override n_segments")
+    parser.add_argument("--check", action="store_true", help="only compare with --out")
+    args = parser.parse_args(argv)
+    params = ArmParams()
+    if args.segments is not None:
+        params = dataclasses.replace(params, n_segments=args.segments)
+    text = generate_xml(params)
+    if args.check:
+        same = args.out.exists() and args.out.read_text() == text
+        print(f"{args.out}: {'up to date' if same else 'DIFFERS from the generator'}")
+        return 0 if same else 1
+    args.out.parent.mkdir(parents=True, exist_ok=True)
+    args.out.write_text(text)
+    print(f"wrote {args.out} ({params.n_segments} segments)")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
