@@ -1,0 +1,588 @@
+"""A reference discrete Cosserat rod of the arm, in JAX.
+
+The rod follows the discretisation of Gazzola et al. (2018) that PyElastica implements, written
+here from the equations: n + 1 nodes carry positions and velocities; n elements carry directors
+(a rotation matrix whose rows are d1, d2, d3 in world components) and an angular velocity in
+their own frame. Each element has stretch and shear strain sigma = Q (x_{j+1} - x_j) / l0 - e3;
+each Voronoi point between two elements has bend and twist curvature kappa = log(Q_prev Q_next^T)
+/ D. Internal force n = S sigma and couple m = B kappa, with S = diag(a G A, a G A, E A) and
+B = diag(E I, E I, G J).
+
+Choices (each differs from PyElastica only where it says so):
+  * The base is clamped by a fixed frame at the base node and a half-length Voronoi domain
+    between it and the first element, so the first element bends too. (PyElastica freezes the
+    first element, which moves the effective clamp half an element up and makes the cantilever
+    error first order in 1 / n; this clamp keeps it second order.)
+  * Stiffnesses are not rescaled by the local dilatation (PyElastica divides by powers of the
+    stretch e); strains here stay below ~1%, so the difference is below ~1% of a strain.
+  * Couples pass between neighbours as world vectors in the frame halfway between them, so
+    internal couples cancel exactly (PyElastica adds kappa x B kappa for the same effect).
+  * Each pressurised chamber adds an internal (active) resultant on the span it covers: an axial
+    force -F d3 and a couple F (d3 x r) with r its offset, as the fluid in the lumen pushes the
+    distal end cap. A free rod then stretches by F / EA and bends with curvature F |r| / EI away
+    from the chamber, the same sign as the MuJoCo model.
+  * Damping is PyElastica's analytical linear damper: after each step v <- v exp(-c dt) and
+    omega <- omega exp(-c_rot dt m_e / J), unconditionally stable.
+
+Time integration is position Verlet (half drift, kick, half drift), explicit, in float64 (the
+public functions run under `jax.enable_x64`). The timestep comes from a stability bound on the
+fastest element mode (see `CosseratParams.max_frequency_rad_s`).
+
+Pose: tip node position (m) then d3 of the last element (its unit tangent). The arm hangs along
+-z from a base at the origin; at rest d1 = +x, d2 = -y, d3 = -z, and chamber k sits at angle
+2 pi k / 3 from +x in the world xy plane.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import functools
+import math
+from typing import NamedTuple
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from mjx_arm import constants, valve
+from mjx_arm.model_gen import ArmParams
+
+_ARM = ArmParams()
+
+#: Translational damping constants (1/s) of the paper's two domains [paper code].
+DOMAIN_DAMPING_PER_S = {"source": 800.0, "constrained": 8000.0}
+#: Pose layout: tip position (m) then unit d3.
+POSE_DIM = 6
+
+
+@dataclasses.dataclass(frozen=True)
+class CosseratParams:
+    """Physical and numerical parameters of the reference rod.
+
+    Geometry and material default to `mjx_arm.model_gen.ArmParams`, so both models describe the
+    same arm; damping defaults to the paper's source domain.
+    """
+
+    length_m: float = _ARM.length_m
+    """Rod length (m)."""
+    radius_m: float = _ARM.radius_m
+    """Cross-section radius (m)."""
+    mass_kg: float = _ARM.mass_kg
+    """Total mass (kg), spread uniformly."""
+    youngs_modulus_pa: float = _ARM.youngs_modulus_pa
+    """Young's modulus E (Pa)."""
+    shear_modulus_pa: float = _ARM.shear_modulus_pa
+    """Shear modulus G (Pa), E / 3 for Poisson ratio 0.5."""
+    shear_coefficient: float = 4.0 / 3.0
+    """Factor a on the shear stiffness a G A (-) [PyElastica's default]."""
+    chamber_length_m: float = _ARM.chamber_length_m
+    """Chamber span from the base (m)."""
+    chamber_offset_m: float = _ARM.chamber_offset_m
+    """Chamber centre distance from the axis (m)."""
+    chamber_area_m2: float = _ARM.chamber_area_m2
+    """Effective chamber area on which pressure pushes the end cap (m^2)."""
+    gravity_mps2: float = _ARM.gravity_mps2
+    """Gravity along -z (m/s^2); 0 switches it off."""
+    n_elements: int = 20
+    """Elements of the rod (-) [paper: 20]."""
+    damping_per_s: float = DOMAIN_DAMPING_PER_S["source"]
+    """Translational damping constant c: v <- v exp(-c dt) (1/s) [paper: 800 / 8000]."""
+    rotational_damping: float = 1e-4
+    """Rotational damping constant c_rot: omega <- omega exp(-c_rot dt m_e / J) (1/s) [paper]."""
+    dt_s: float | None = None
+    """Timestep (s); None picks the largest that divides the 0.1 s control period and stays
+    below `cfl` times the stability limit."""
+    cfl: float = 0.7
+    """Fraction of the explicit stability limit used when `dt_s` is None (-)."""
+    settle_damping_per_s: float | None = None
+    """Damping (1/s, translational and rotational) of static solves; None uses twice the first
+    bending frequency, which settles the slowest mode about critically."""
+    settle_tol_mps: float = 1e-7
+    """Static solves stop once every node and element-rim speed is below this (m/s)."""
+    settle_max_s: float = 10.0
+    """Upper limit on the simulated time of one static solve (s)."""
+
+    # ------------------------------------------------------------------ derived quantities
+
+    @property
+    def element_length_m(self) -> float:
+        return self.length_m / self.n_elements
+
+    @property
+    def element_mass_kg(self) -> float:
+        return self.mass_kg / self.n_elements
+
+    @property
+    def area_m2(self) -> float:
+        return math.pi * self.radius_m**2
+
+    @property
+    def second_moment_m4(self) -> float:
+        return math.pi * self.radius_m**4 / 4.0
+
+    @property
+    def density_kg_m3(self) -> float:
+        return self.mass_kg / (self.area_m2 * self.length_m)
+
+    @property
+    def bend_stiffness_nm2(self) -> float:
+        """E I (N m^2)."""
+        return self.youngs_modulus_pa * self.second_moment_m4
+
+    @property
+    def axial_stiffness_n(self) -> float:
+        """E A (N)."""
+        return self.youngs_modulus_pa * self.area_m2
+
+    @property
+    def shear_stiffness_n(self) -> float:
+        """a G A (N)."""
+        return self.shear_coefficient * self.shear_modulus_pa * self.area_m2
+
+    @property
+    def first_bending_rad_s(self) -> float:
+        """First cantilever bending frequency 1.875^2 sqrt(EI / (rho A L^4)) (rad/s)."""
+        rho_a = self.mass_kg / self.length_m
+        return 1.8751**2 * math.sqrt(self.bend_stiffness_nm2 / (rho_a * self.length_m**4))
+
+    @property
+    def max_frequency_rad_s(self) -> float:
+        """Upper estimate of the fastest element mode (rad/s).
+
+        Axial (and bending) waves alternate between neighbours at 2 c / l with c = sqrt(E / rho);
+        an element's rotation against shear adds 4 a G / (rho r^2) to the square.
+        """
+        rho, ell = self.density_kg_m3, self.element_length_m
+        axial = 4.0 * self.youngs_modulus_pa / (rho * ell**2)
+        shear = 4.0 * self.shear_coefficient * self.shear_modulus_pa / (rho * self.radius_m**2)
+        return math.sqrt(axial + shear)
+
+    @property
+    def critical_dt_s(self) -> float:
+        """Position Verlet is stable for dt < 2 / omega_max (s)."""
+        return 2.0 / self.max_frequency_rad_s
+
+    @property
+    def n_substeps(self) -> int:
+        """Physics steps per 0.1 s control period."""
+        if self.dt_s is not None:
+            return int(round(constants.CONTROL_PERIOD_S / self.dt_s))
+        return math.ceil(constants.CONTROL_PERIOD_S / (self.cfl * self.critical_dt_s))
+
+    @property
+    def timestep_s(self) -> float:
+        """The timestep used (s): the control period over `n_substeps`."""
+        return constants.CONTROL_PERIOD_S / self.n_substeps
+
+    @property
+    def settle_rate_per_s(self) -> float:
+        if self.settle_damping_per_s is not None:
+            return self.settle_damping_per_s
+        return 2.0 * self.first_bending_rad_s
+
+    def validate(self) -> None:
+        """Raises ValueError for parameters that cannot make a stable rod."""
+        if self.n_elements < 2:
+            raise ValueError(f"n_elements must be >= 2, got {self.n_elements}")
+        if not 0.0 < self.chamber_length_m <= self.length_m:
+            raise ValueError("chamber_length_m must lie in (0, length_m]")
+        if self.dt_s is not None:
+            period = constants.CONTROL_PERIOD_S / self.dt_s
+            if abs(period - round(period)) > 1e-6:
+                raise ValueError(f"dt_s={self.dt_s} does not divide the 0.1 s control period")
+        if self.timestep_s >= self.critical_dt_s:
+            raise ValueError(
+                f"timestep {self.timestep_s:.3g} s is above the stability limit"
+                f" {self.critical_dt_s:.3g} s for {self.n_elements} elements"
+            )
+
+    @classmethod
+    def for_domain(cls, domain: str, **overrides) -> CosseratParams:
+        """Parameters with the damping constant of domain "source" or "constrained"."""
+        if domain not in DOMAIN_DAMPING_PER_S:
+            raise ValueError(f"unknown domain {domain!r}; known: {sorted(DOMAIN_DAMPING_PER_S)}")
+        return cls(damping_per_s=DOMAIN_DAMPING_PER_S[domain], **overrides)
+
+
+class RodState(NamedTuple):
+    """State of the rod (n elements).
+
+    Attributes:
+      x: [n + 1, 3] node positions (m), world frame, base node at the origin.
+      v: [n + 1, 3] node velocities (m/s).
+      q: [n, 3, 3] directors; row k of q[j] is d_{k+1} of element j in world components.
+      w: [n, 3] angular velocities (rad/s) in each element's own frame.
+    """
+
+    x: jnp.ndarray
+    v: jnp.ndarray
+    q: jnp.ndarray
+    w: jnp.ndarray
+
+
+class _Rod(NamedTuple):
+    """Constants of one discretisation, as float64 numpy arrays (closed over by jitted code)."""
+
+    rest_length: float  # l0 (m)
+    dt: float  # (s)
+    node_mass: np.ndarray  # [n + 1] (kg)
+    inertia: np.ndarray  # [n, 3] element mass moments of inertia in the element frame (kg m^2)
+    shear_diag: np.ndarray  # [3] diag of S (N)
+    bend_diag: np.ndarray  # [3] diag of B (N m^2)
+    voronoi_length: np.ndarray  # [n] base half-domain then interior domains (m)
+    chamber_elem: np.ndarray  # [n] fraction of each element inside the chamber span
+    chamber_voronoi: np.ndarray  # [n] fraction of each Voronoi domain inside it
+    chamber_couple_dir: np.ndarray  # [3 chambers, 3] d3 x r_k in the element frame (m)
+    force_per_bar: float  # chamber force per bar (N)
+    clamp: np.ndarray  # [3, 3] base frame
+    gravity: np.ndarray  # [3] (m/s^2)
+    rot_damp: np.ndarray  # [n, 3] per-step factor on omega (dynamics)
+    trans_damp: float  # per-step factor on v (dynamics)
+    settle_damp: float  # per-step factor on v and omega (static solves)
+
+
+#: Rest directors: d1 = +x, d2 = -y, d3 = -z.
+_CLAMP = np.array([[1.0, 0.0, 0.0], [0.0, -1.0, 0.0], [0.0, 0.0, -1.0]])
+
+
+def _overlap(lo: np.ndarray, hi: np.ndarray, span: float) -> np.ndarray:
+    """Length of [lo, hi] inside [0, span]."""
+    return np.clip(np.minimum(hi, span) - np.maximum(lo, 0.0), 0.0, None)
+
+
+def _make_rod(params: CosseratParams) -> _Rod:
+    params.validate()
+    n, ell = params.n_elements, params.element_length_m
+    dt = params.timestep_s
+    m_e = params.element_mass_kg
+    node_mass = np.full(n + 1, m_e)
+    node_mass[[0, -1]] = 0.5 * m_e
+    r2 = params.radius_m**2
+    inertia = np.tile(m_e * np.array([r2 / 4.0, r2 / 4.0, r2 / 2.0]), (n, 1))
+    g_j = params.shear_modulus_pa * 2.0 * params.second_moment_m4
+    starts = np.arange(n) * ell
+    elem_frac = _overlap(starts, starts + ell, params.chamber_length_m) / ell
+    vor_lo = np.concatenate([[0.0], starts[1:] - 0.5 * ell])
+    vor_hi = np.concatenate([[0.5 * ell], starts[1:] + 0.5 * ell])
+    voronoi = vor_hi - vor_lo
+    vor_frac = _overlap(vor_lo, vor_hi, params.chamber_length_m) / voronoi
+    angles = 2.0 * np.pi * np.arange(3) / 3.0
+    offsets_world = params.chamber_offset_m * np.stack(
+        [np.cos(angles), np.sin(angles), np.zeros(3)], axis=-1
+    )
+    offsets_local = offsets_world @ _CLAMP.T
+    couple_dir = np.cross(np.array([0.0, 0.0, 1.0]), offsets_local)
+    return _Rod(
+        rest_length=ell,
+        dt=dt,
+        node_mass=node_mass,
+        inertia=inertia,
+        shear_diag=np.array(
+            [params.shear_stiffness_n, params.shear_stiffness_n, params.axial_stiffness_n]
+        ),
+        bend_diag=np.array([params.bend_stiffness_nm2, params.bend_stiffness_nm2, g_j]),
+        voronoi_length=voronoi,
+        chamber_elem=elem_frac,
+        chamber_voronoi=vor_frac,
+        chamber_couple_dir=couple_dir,
+        force_per_bar=constants.BAR_TO_PA * params.chamber_area_m2,
+        clamp=_CLAMP,
+        gravity=np.array([0.0, 0.0, -params.gravity_mps2]),
+        rot_damp=np.exp(-params.rotational_damping * dt * m_e / inertia),
+        trans_damp=math.exp(-params.damping_per_s * dt),
+        settle_damp=math.exp(-params.settle_rate_per_s * dt),
+    )
+
+
+def straight_state(params: CosseratParams) -> RodState:
+    """The undeformed rod hanging straight down, at rest (float64 numpy arrays)."""
+    n = params.n_elements
+    z = -np.linspace(0.0, params.length_m, n + 1)
+    x = np.stack([np.zeros(n + 1), np.zeros(n + 1), z], axis=-1)
+    return RodState(x=x, v=np.zeros((n + 1, 3)), q=np.tile(_CLAMP, (n, 1, 1)), w=np.zeros((n, 3)))
+
+
+# ---------------------------------------------------------------------- rotations
+
+
+def _hat(v: jnp.ndarray) -> jnp.ndarray:
+    """[..., 3] -> [..., 3, 3] cross-product matrices."""
+    zero = jnp.zeros_like(v[..., 0])
+    return jnp.stack(
+        [
+            jnp.stack([zero, -v[..., 2], v[..., 1]], -1),
+            jnp.stack([v[..., 2], zero, -v[..., 0]], -1),
+            jnp.stack([-v[..., 1], v[..., 0], zero], -1),
+        ],
+        -2,
+    )
+
+
+def _exp_so3(theta: jnp.ndarray) -> jnp.ndarray:
+    """Rotation vectors [..., 3] -> rotation matrices exp(hat(theta)) [..., 3, 3] (Rodrigues)."""
+    angle = jnp.linalg.norm(theta, axis=-1)
+    small = angle < 1e-8
+    safe = jnp.where(small, 1.0, angle)
+    a = jnp.where(small, 1.0 - angle**2 / 6.0, jnp.sin(safe) / safe)
+    b = jnp.where(small, 0.5 - angle**2 / 24.0, 2.0 * (jnp.sin(0.5 * safe) / safe) ** 2)
+    k = _hat(theta)
+    eye = jnp.eye(3, dtype=theta.dtype)
+    return eye + a[..., None, None] * k + b[..., None, None] * (k @ k)
+
+
+def _log_so3(rot: jnp.ndarray) -> jnp.ndarray:
+    """Rotation matrices [..., 3, 3] (angle < pi) -> rotation vectors [..., 3]."""
+    skew = 0.5 * jnp.stack(
+        [
+            rot[..., 2, 1] - rot[..., 1, 2],
+            rot[..., 0, 2] - rot[..., 2, 0],
+            rot[..., 1, 0] - rot[..., 0, 1],
+        ],
+        -1,
+    )
+    sin_angle = jnp.linalg.norm(skew, axis=-1)
+    cos_angle = 0.5 * (jnp.trace(rot, axis1=-2, axis2=-1) - 1.0)
+    angle = jnp.arctan2(sin_angle, cos_angle)
+    small = sin_angle < 1e-12
+    factor = jnp.where(small, 1.0, angle / jnp.where(small, 1.0, sin_angle))
+    return factor[..., None] * skew
+
+
+def _orthonormalise(q: jnp.ndarray) -> jnp.ndarray:
+    """One Newton-Schulz step toward the nearest rotation; removes rounding drift."""
+    return 1.5 * q - 0.5 * q @ jnp.swapaxes(q, -1, -2) @ q
+
+
+# ---------------------------------------------------------------------- physics
+
+
+def _loads(
+    rod: _Rod,
+    x: jnp.ndarray,
+    q: jnp.ndarray,
+    pressure_bar: jnp.ndarray,
+    tip_force_n: jnp.ndarray,
+    tip_couple_nm: jnp.ndarray,
+) -> tuple[jnp.ndarray, jnp.ndarray]:
+    """Node forces [n + 1, 3] (N, world) and element torques [n, 3] (N m, element frame)."""
+    e3 = jnp.array([0.0, 0.0, 1.0], dtype=x.dtype)
+    chamber_force = pressure_bar * rod.force_per_bar  # [3] (N)
+
+    edges = x[1:] - x[:-1]
+    sigma = jnp.einsum("nij,nj->ni", q, edges) / rod.rest_length - e3
+    n_local = sigma * rod.shear_diag - (chamber_force.sum() * rod.chamber_elem)[:, None] * e3
+    n_world = jnp.einsum("nji,nj->ni", q, n_local)
+
+    q_prev = jnp.concatenate([jnp.asarray(rod.clamp, x.dtype)[None], q[:-1]], axis=0)
+    theta = _log_so3(q_prev @ jnp.swapaxes(q, -1, -2))  # [n, 3] in the frame of q_prev
+    kappa = theta / rod.voronoi_length[:, None]
+    active = rod.chamber_voronoi[:, None] * (chamber_force @ rod.chamber_couple_dir)[None]
+    m_local = kappa * rod.bend_diag + active
+    m_mid = jnp.einsum("nij,nj->ni", _exp_so3(0.5 * theta), m_local)
+    m_world = jnp.einsum("nji,nj->ni", q_prev, m_mid)
+
+    zero = jnp.zeros((1, 3), x.dtype)
+    forces = jnp.concatenate([n_world, zero]) - jnp.concatenate([zero, n_world])
+    forces = forces + rod.node_mass[:, None] * rod.gravity
+    forces = forces.at[-1].add(tip_force_n)
+
+    torque_world = jnp.concatenate([m_world[1:], zero]) - m_world + jnp.cross(edges, n_world)
+    torque_world = torque_world.at[-1].add(tip_couple_nm)
+    return forces, jnp.einsum("nij,nj->ni", q, torque_world)
+
+
+def _step(
+    rod: _Rod,
+    state: RodState,
+    pressure_bar: jnp.ndarray,
+    tip_force_n: jnp.ndarray,
+    tip_couple_nm: jnp.ndarray,
+    trans_damp,
+    rot_damp,
+) -> RodState:
+    """One position-Verlet step: half drift, kick with damping, half drift; base node fixed."""
+    h = 0.5 * rod.dt
+    x = (state.x + h * state.v).at[0].set(0.0)
+    q = _exp_so3(-h * state.w) @ state.q
+    forces, torques = _loads(rod, x, q, pressure_bar, tip_force_n, tip_couple_nm)
+    v = state.v + rod.dt * forces / rod.node_mass[:, None]
+    v = (v * trans_damp).at[0].set(0.0)
+    w = state.w
+    w = w + rod.dt * (torques - jnp.cross(w, rod.inertia * w)) / rod.inertia
+    w = w * rot_damp
+    x = (x + h * v).at[0].set(0.0)
+    q = _exp_so3(-h * w) @ q
+    return RodState(x, v, q, w)
+
+
+def tip_pose(state: RodState) -> jnp.ndarray:
+    """Pose [6]: tip node position (m) then d3 of the last element."""
+    return jnp.concatenate([state.x[-1], state.q[-1, 2]])
+
+
+def _settle(
+    rod: _Rod,
+    n_chunk: int,
+    max_chunks: int,
+    tol: float,
+    radius: float,
+    state: RodState,
+    pressure_bar: jnp.ndarray,
+    tip_force_n: jnp.ndarray,
+    tip_couple_nm: jnp.ndarray,
+) -> tuple[RodState, jnp.ndarray]:
+    """Heavily damped dynamics until every speed is below `tol`; returns (state, steps)."""
+
+    def chunk(st, _):
+        return _step(
+            rod, st, pressure_bar, tip_force_n, tip_couple_nm, rod.settle_damp, rod.settle_damp
+        ), None
+
+    def cond(carry):
+        _, k, speed = carry
+        return (k < max_chunks) & (speed > tol)
+
+    def body(carry):
+        st, k, _ = carry
+        st, _ = jax.lax.scan(chunk, st, None, length=n_chunk)
+        st = st._replace(q=_orthonormalise(st.q))
+        speed = jnp.maximum(jnp.abs(st.v).max(), radius * jnp.abs(st.w).max())
+        return st, k + 1, speed
+
+    init = (state, jnp.array(0), jnp.array(jnp.inf, dtype=state.x.dtype))
+    state, k, _ = jax.lax.while_loop(cond, body, init)
+    return state, k * n_chunk
+
+
+def _rollout_single(
+    rod: _Rod,
+    n_substeps: int,
+    valve_params: valve.ValveParams,
+    rest: RodState,
+    commands_bar: jnp.ndarray,
+) -> jnp.ndarray:
+    """Commands [T, 3] (bar) -> poses [T, 6], read at the end of each control period."""
+    commands = valve.saturate(commands_bar, valve_params)
+    zero = jnp.zeros(3, commands.dtype)
+
+    def physics_step(st, pressure):
+        return _step(rod, st, pressure, zero, zero, rod.trans_damp, rod.rot_damp), None
+
+    def control_step(carry, command):
+        st, pressure = carry
+        pressures = valve.substep_pressures(pressure, command, n_substeps, rod.dt, valve_params)
+        st, _ = jax.lax.scan(physics_step, st, pressures)
+        st = st._replace(q=_orthonormalise(st.q))
+        return (st, pressures[-1]), tip_pose(st)
+
+    p0 = jnp.full((3,), valve_params.p_min_bar, commands.dtype)
+    _, poses = jax.lax.scan(control_step, (rest, p0), commands)
+    return poses
+
+
+# ---------------------------------------------------------------------- public API
+
+
+@functools.lru_cache(maxsize=32)
+def _settle_fn(params: CosseratParams):
+    rod = _make_rod(params)
+    n_chunk = 100
+    max_chunks = max(1, math.ceil(params.settle_max_s / (n_chunk * rod.dt)))
+    return jax.jit(
+        functools.partial(_settle, rod, n_chunk, max_chunks, params.settle_tol_mps, params.radius_m)
+    )
+
+
+def static_state(
+    pressures_bar,
+    params: CosseratParams = CosseratParams(),
+    tip_force_n=(0.0, 0.0, 0.0),
+    tip_couple_nm=(0.0, 0.0, 0.0),
+    initial: RodState | None = None,
+) -> tuple[RodState, int]:
+    """Equilibrium of the rod under chamber pressures and optional tip loads.
+
+    Solved by heavily damped dynamics (`CosseratParams.settle_damping_per_s`), which leaves the
+    equilibrium unchanged. Pressures are used as given (no valve saturation), so tests can load
+    the rod with any pressure.
+
+    Args:
+      pressures_bar: [3] chamber pressures (bar).
+      params: the rod.
+      tip_force_n: [3] force on the tip node (N, world frame).
+      tip_couple_nm: [3] couple on the last element (N m, world frame).
+      initial: start state; None starts from the straight rod.
+
+    Returns:
+      (state, steps): the settled `RodState` as float64 numpy arrays, and the physics steps taken.
+    """
+    start = straight_state(params) if initial is None else initial
+    with jax.enable_x64(True):
+        state, steps = _settle_fn(params)(
+            RodState(*(jnp.asarray(a, jnp.float64) for a in start)),
+            jnp.asarray(pressures_bar, jnp.float64),
+            jnp.asarray(tip_force_n, jnp.float64),
+            jnp.asarray(tip_couple_nm, jnp.float64),
+        )
+        return RodState(*(np.asarray(a) for a in state)), int(steps)
+
+
+def static_pose(
+    pressures_bar,
+    params: CosseratParams = CosseratParams(),
+    tip_force_n=(0.0, 0.0, 0.0),
+    tip_couple_nm=(0.0, 0.0, 0.0),
+) -> np.ndarray:
+    """Equilibrium tip pose [6] (m, then unit d3) under held pressures [3] (bar); see
+    `static_state`."""
+    state, _ = static_state(pressures_bar, params, tip_force_n, tip_couple_nm)
+    return np.concatenate([state.x[-1], state.q[-1, 2]])
+
+
+@functools.lru_cache(maxsize=32)
+def rest_state(params: CosseratParams = CosseratParams()) -> RodState:
+    """The state every rollout starts from: settled under gravity, chambers at the valve floor."""
+    state, _ = static_state(np.full(3, constants.P_MIN_BAR), params)
+    return state
+
+
+@functools.lru_cache(maxsize=32)
+def _rollout_jit(params: CosseratParams):
+    rod = _make_rod(params)
+    with jax.enable_x64(True):
+        rest = RodState(*(jnp.asarray(a, jnp.float64) for a in rest_state(params)))
+    single = functools.partial(_rollout_single, rod, params.n_substeps, valve.ValveParams(), rest)
+    return jax.jit(jax.vmap(single))
+
+
+def rollout_fn(params: CosseratParams = CosseratParams()):
+    """The pure rollout `fn(commands [T, 3] bar) -> poses [T, 6]` for one program.
+
+    Jit and vmap it yourself; call it under `jax.enable_x64(True)` with float64 commands.
+    """
+    rod = _make_rod(params)
+    rest = RodState(*(jnp.asarray(a) for a in rest_state(params)))
+    return functools.partial(_rollout_single, rod, params.n_substeps, valve.ValveParams(), rest)
+
+
+def rollout(pressures_bar, params: CosseratParams = CosseratParams()) -> np.ndarray:
+    """Simulates pressure programs from rest and returns the tip pose after each command.
+
+    Each 10 Hz command saturates to the valve's range ([0.2, 3.5] bar) and is held for 0.1 s while
+    the chamber pressures lag toward it (`mjx_arm.valve`); the pose is read at the end of each
+    period. Batches run as one jitted, vmapped call (compiled once per params and shape).
+
+    Args:
+      pressures_bar: [T, 3] or [B, T, 3] chamber commands (bar).
+      params: the rod; `CosseratParams.for_domain("constrained")` for the constrained domain.
+
+    Returns:
+      [T, 6] or [B, T, 6] float64 poses: tip position (m) then unit d3.
+    """
+    from mjx_arm.arm import check_pressures  # deferred: arm imports mujoco.mjx
+
+    batched = check_pressures(pressures_bar)
+    fn = _rollout_jit(params)
+    with jax.enable_x64(True):
+        poses = np.asarray(fn(jnp.asarray(batched, jnp.float64)))
+    return poses if np.ndim(pressures_bar) == 3 else poses[0]
