@@ -1,0 +1,514 @@
+"""Motor babbling: pseudo-random pressure programs, simulated in parallel, saved as datasets.
+
+Each chamber independently jumps to a uniform random target in [0, 3.5] bar and holds it for a
+uniform random whole number of 0.1 s control periods in [0.5, 3] s; the three chambers switch at
+different times, so the programs visit the whole pressure cube and hence the workspace. Every
+trajectory starts from the arm's rest state (the paper resets the arm between trajectories).
+
+Programs are reproducible: trajectory i of a (domain, split) stream is drawn by a NumPy
+Generator seeded with ``[seed, stream_id(domain, split), i]``, so it does not depend on the batch,
+chunk, backend or device count. (NumPy rather than jax.random: each new batch shape would cost a
+JAX compilation of seconds on a small CPU, and the programs are a negligible cost.)
+
+Command line (writes ``<out>/<domain>_<split>.npz``, see `mjx_arm.dataset` for the layout)::
+
+    python -m mjx_arm.babble --preset paper --out data/babble          # 50 + 3 x 60 s, both domains
+    python -m mjx_arm.babble --domain source --n 1000 --duration 10 --chunk 4096 --backend mjx
+
+Validation trajectories go to a separate file per domain (``<domain>_val.npz``) with their own
+random stream. With ``--domain both`` the task-space bounds stored in every file are the per-axis
+min/max over both domains' train and validation poses (the paper's normalisation); with one
+domain, over that domain's data only (use `dataset.workspace_bounds` and `Dataset.with_bounds` to
+share bounds later).
+
+Parallelism. With ``--backend mjx`` each chunk of programs is one jitted, vmapped rollout, its
+batch axis sharded over every device with a `NamedSharding` on a 1-D ``("batch",)`` mesh; chunks
+are padded to a multiple of the device count (and all to the same size, so there is one compile).
+``--backend c`` runs MuJoCo C `mujoco.rollout` on all CPU cores; ``auto`` picks ``c`` when JAX's
+default backend is the CPU (MJX on CPU is far slower than MuJoCo C) and ``mjx`` otherwise.
+
+Multi-host. Start the same command on every host with ``--distributed`` (it calls
+`jax.distributed.initialize()`, which reads the coordinator address, process count and id from
+the cluster environment -- SLURM, Open MPI, TPU pods -- or from ``JAX_COORDINATOR_ADDRESS``,
+``JAX_NUM_PROCESSES`` and ``JAX_PROCESS_ID``). The mesh then spans all global devices; each host
+builds only its own shards of the (identical, seeded) programs with
+`jax.make_array_from_callback`, the poses are gathered with
+`multihost_utils.process_allgather`, and process 0 alone writes the files.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import functools
+import json
+import math
+import sys
+import time
+import zlib
+from collections.abc import Callable, Sequence
+from pathlib import Path
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+from jax.sharding import Mesh, NamedSharding
+from jax.sharding import PartitionSpec as P
+
+from mjx_arm import arm as arm_lib
+from mjx_arm import constants, dataset
+
+BACKENDS = ("auto", "mjx", "c")
+
+
+@dataclasses.dataclass(frozen=True)
+class BabbleConfig:
+    """Options of a babbling run. Defaults are the paper's (50 + 3 trajectories of 60 s)."""
+
+    seed: int = 0
+    """Root seed of every pressure program."""
+    n_train: int = 50
+    """Training trajectories per domain [paper: 50]."""
+    n_val: int = 3
+    """Validation trajectories per domain, in a separate file [paper: 3]."""
+    duration_s: float = 60.0
+    """Length of each trajectory (s) [paper: 60 s]."""
+    p_low_bar: float = 0.0
+    """Lowest target pressure (bar); commands under the 0.2 bar valve floor act as the floor."""
+    p_high_bar: float = constants.P_MAX_BAR
+    """Highest target pressure (bar) [paper: 3.5 bar]."""
+    hold_min_s: float = 0.5
+    """Shortest hold of one target (s)."""
+    hold_max_s: float = 3.0
+    """Longest hold of one target (s)."""
+    domains: tuple[str, ...] = ("source", "constrained")
+    """Domains to simulate (`mjx_arm.DOMAINS` names)."""
+    backend: str = "auto"
+    """"mjx", "c" (MuJoCo C on all CPU cores) or "auto" (c when JAX runs on the CPU)."""
+    chunk: int = 4096
+    """Trajectories simulated at once (over all devices); bounds device memory."""
+
+    def __post_init__(self):
+        if self.backend not in BACKENDS:
+            raise ValueError(f"backend must be one of {BACKENDS}, got {self.backend!r}")
+        if min(self.n_train, self.n_val) < 0 or self.n_train + self.n_val == 0:
+            raise ValueError("n_train and n_val must be >= 0, not both 0")
+        if self.n_steps < 1 or self.chunk < 1:
+            raise ValueError("duration_s must cover at least one control period; chunk >= 1")
+        if not 0 < self.hold_min_steps <= self.hold_max_steps:
+            raise ValueError("need 0 < hold_min_s <= hold_max_s (at least one control period)")
+        if not self.p_low_bar <= self.p_high_bar:
+            raise ValueError("need p_low_bar <= p_high_bar")
+
+    @property
+    def n_steps(self) -> int:
+        """Control periods per trajectory (T)."""
+        return int(round(self.duration_s * constants.CONTROL_HZ))
+
+    @property
+    def hold_min_steps(self) -> int:
+        return int(round(self.hold_min_s * constants.CONTROL_HZ))
+
+    @property
+    def hold_max_steps(self) -> int:
+        return int(round(self.hold_max_s * constants.CONTROL_HZ))
+
+    def splits(self) -> dict[str, int]:
+        """Split name -> number of trajectories (splits with none are left out)."""
+        return {k: n for k, n in (("train", self.n_train), ("val", self.n_val)) if n > 0}
+
+
+#: The paper's data: 50 training and 3 validation trajectories of 60 s in each domain.
+PAPER = BabbleConfig()
+
+
+# ---------------------------------------------------------------------------------- programs
+
+
+def stream_id(domain: str, split: str) -> int:
+    """A stable 31-bit id of a (domain, split) random stream."""
+    return zlib.crc32(f"{domain}/{split}".encode()) & 0x7FFFFFFF
+
+
+def program(rng: np.random.Generator, config: BabbleConfig) -> np.ndarray:
+    """One program [T, 3] (bar, float32): per-chamber random targets held for random durations."""
+    n_steps, lo, hi = config.n_steps, config.hold_min_steps, config.hold_max_steps
+    n_holds = n_steps // lo + 1  # enough holds to cover T even if every one is the shortest
+    holds = rng.integers(lo, hi + 1, size=(3, n_holds))
+    targets = rng.uniform(config.p_low_bar, config.p_high_bar, size=(3, n_holds))
+    steps = np.arange(n_steps)
+    which = np.stack([np.searchsorted(end, steps, side="right") for end in holds.cumsum(1)])
+    return np.take_along_axis(targets, which, axis=1).T.astype(np.float32)
+
+
+def make_programs(
+    config: BabbleConfig, indices, *, domain: str = "source", split: str = "train"
+) -> np.ndarray:
+    """Babbling programs of the given trajectory indices.
+
+    Trajectory i draws from ``np.random.default_rng([seed, stream_id(domain, split), i])``, so it
+    is the same whatever else is generated with it.
+
+    Args:
+      config: babbling options (seed, duration, pressure range, hold durations).
+      indices: [B] int trajectory indices (>= 0) within the (domain, split) stream.
+      domain, split: name the random stream.
+
+    Returns:
+      [B, T, 3] float32 chamber commands (bar), T = config.n_steps.
+    """
+    stream = stream_id(domain, split)
+    out = np.empty((len(indices), config.n_steps, 3), np.float32)
+    for row, i in enumerate(indices):
+        out[row] = program(np.random.default_rng([config.seed, stream, int(i)]), config)
+    return out
+
+
+# ---------------------------------------------------------------------------------- rollouts
+
+
+def resolve_backend(backend: str) -> str:
+    """ "auto" -> "c" when JAX runs on the CPU, else "mjx"; other names pass through."""
+    if backend not in BACKENDS:
+        raise ValueError(f"backend must be one of {BACKENDS}, got {backend!r}")
+    if backend == "auto":
+        return "c" if jax.default_backend() == "cpu" else "mjx"
+    return backend
+
+
+def batch_mesh(devices: Sequence[jax.Device] | None = None) -> Mesh:
+    """A 1-D mesh with axis "batch" over `devices` (default: every device of every host)."""
+    return Mesh(np.asarray(devices if devices is not None else jax.devices()), ("batch",))
+
+
+def padded_size(n: int, n_devices: int) -> int:
+    """Smallest multiple of `n_devices` that is >= n (and >= n_devices)."""
+    return max(1, math.ceil(n / n_devices)) * n_devices
+
+
+class ShardedRollout:
+    """A jitted, vmapped MJX rollout whose batch axis is sharded over a 1-D device mesh.
+
+    Call it with commands [B, T, 3] (bar, B any size): it pads B to a multiple of the device
+    count, runs, and returns (poses [B, T, 6] float32 numpy, ok [B, T] bool numpy).
+
+    The rest state is an argument of the jitted function, not a constant baked into it, so arms
+    that differ only in domain (same MJCF structure) share one compilation.
+    """
+
+    def __init__(self, arm: arm_lib.Arm, devices: Sequence[jax.Device] | None = None):
+        self.arm = arm
+        self.mesh = batch_mesh(devices)
+        self.n_devices = self.mesh.devices.size
+        self.batch_sharding = NamedSharding(self.mesh, P("batch"))
+        replicated = NamedSharding(self.mesh, P())
+        self.mjx_model = jax.device_put(arm.mjx_model, replicated)
+        self.rest = jax.device_put(
+            (jnp.asarray(arm.rest_qpos), jnp.asarray(arm.rest_qvel)), replicated
+        )
+        self.fn = _sharded_fn(
+            tuple(self.mesh.devices.flat),
+            arm.tip_site_id,
+            tuple(int(i) for i in arm.actuator_ids),
+            arm.n_substeps,
+            arm.valve,
+        )
+
+    def shard(self, commands_bar: np.ndarray) -> jax.Array:
+        """Commands [B, T, 3] (B a multiple of the device count) -> a global sharded array.
+
+        Each process materialises only the shards of its own devices (multi-host safe, given
+        every process holds the same `commands_bar`).
+        """
+        commands_bar = np.asarray(commands_bar, np.float32)
+        return jax.make_array_from_callback(
+            commands_bar.shape, self.batch_sharding, lambda index: commands_bar[index]
+        )
+
+    def pad(self, commands_bar: np.ndarray, size: int | None = None) -> np.ndarray:
+        """Pads [B, T, 3] to [size, T, 3] (default: the next multiple of the device count) by
+        repeating the last program; the padded rows are simulated and dropped."""
+        n = commands_bar.shape[0]
+        size = padded_size(n, self.n_devices) if size is None else size
+        if size % self.n_devices or size < n:
+            raise ValueError(f"pad size {size} must be >= {n} and a multiple of {self.n_devices}")
+        return np.concatenate([commands_bar, np.repeat(commands_bar[-1:], size - n, axis=0)])
+
+    def compile(self, batch: int, n_steps: int):
+        """Compiles for commands [batch, n_steps, 3]; returns the compiled executable."""
+        spec = jax.ShapeDtypeStruct((batch, n_steps, 3), jnp.float32, sharding=self.batch_sharding)
+        return self.fn.lower(self.mjx_model, self.rest, spec).compile()
+
+    def run_device(self, commands: jax.Array) -> tuple[jax.Array, jax.Array]:
+        """Runs sharded commands [B, T, 3] (B padded); returns device arrays, not waited on."""
+        return self.fn(self.mjx_model, self.rest, commands)
+
+    def __call__(self, commands_bar: np.ndarray, size: int | None = None):
+        n = commands_bar.shape[0]
+        poses, ok = self.run_device(self.shard(self.pad(commands_bar, size)))
+        return _gather(poses)[:n].astype(np.float32), _gather(ok)[:n]
+
+
+@functools.lru_cache(maxsize=16)
+def _sharded_fn(devices, tip_site, actuators, n_substeps, valve_params):
+    """jit(vmap(rollout)) of (mjx_model, (rest_qpos, rest_qvel), commands [B, T, 3]), cached."""
+    mesh = batch_mesh(devices)
+    replicated, batch = NamedSharding(mesh, P()), NamedSharding(mesh, P("batch"))
+
+    def rollout(mjx_model, rest, commands_bar):
+        return arm_lib._rollout_single(
+            mjx_model,
+            commands_bar,
+            tip_site=tip_site,
+            actuators=actuators,
+            n_substeps=n_substeps,
+            valve_params=valve_params,
+            rest_qpos=rest[0],
+            rest_qvel=rest[1],
+        )
+
+    return jax.jit(
+        jax.vmap(rollout, in_axes=(None, None, 0)),
+        in_shardings=(replicated, replicated, batch),
+        out_shardings=batch,
+    )
+
+
+def _gather(x: jax.Array) -> np.ndarray:
+    if jax.process_count() > 1:
+        from jax.experimental import multihost_utils
+
+        return np.asarray(multihost_utils.process_allgather(x, tiled=True))
+    return np.asarray(x)
+
+
+def simulate(
+    arm: arm_lib.Arm,
+    programs_bar: np.ndarray,
+    *,
+    backend: str = "auto",
+    chunk: int = 4096,
+    progress: Callable[[int], None] | None = None,
+    sharded: ShardedRollout | None = None,
+    fixed_size: bool = False,
+) -> np.ndarray:
+    """Simulates babbling programs in chunks.
+
+    Args:
+      arm: the arm in its domain.
+      programs_bar: [N, T, 3] commands (bar).
+      backend: "mjx", "c" or "auto" (see `resolve_backend`).
+      chunk: programs per call; with mjx every chunk is padded to the same size (one compile).
+      progress: called with the number of trajectories finished after each chunk.
+      sharded: a `ShardedRollout` of `arm` to reuse (mjx only); built when None.
+      fixed_size: mjx only: pad every call to `chunk` (rounded up to the device count) even when
+        N < chunk, so runs of different N share one compilation.
+
+    Returns:
+      [N, T, 6] float32 poses: tip position (m) then unit d3.
+
+    Raises:
+      SimulationDivergedError: a trajectory diverged.
+    """
+    backend = resolve_backend(backend)
+    n = programs_bar.shape[0]
+    poses = np.zeros(programs_bar.shape[:2] + (arm_lib.POSE_DIM,), np.float32)
+    if backend == "mjx":
+        sharded = sharded if sharded is not None else ShardedRollout(arm)
+        size = padded_size(chunk if fixed_size else min(chunk, n), sharded.n_devices)
+    else:
+        size = chunk
+    for start in range(0, n, size):
+        stop = min(start + size, n)
+        if backend == "mjx":
+            out, ok = sharded(programs_bar[start:stop], size)
+            _raise_if_diverged(ok, offset=start)
+            poses[start:stop] = out
+        else:
+            poses[start:stop] = arm.rollout(programs_bar[start:stop], backend="c")
+        if progress is not None:
+            progress(stop - start)
+    return poses
+
+
+def _raise_if_diverged(ok: np.ndarray, offset: int = 0) -> None:
+    """ok: [B, T] flags of trajectories offset .. offset + B."""
+    bad = np.flatnonzero(~ok[:, -1])
+    if bad.size:
+        first = np.array([np.argmin(ok[b]) for b in bad])
+        raise arm_lib.SimulationDivergedError(
+            f"simulation diverged in {bad.size} trajectory(ies) {(bad + offset)[:10].tolist()},"
+            f" first at control step(s) {first[:10].tolist()}",
+            bad + offset,
+            first,
+        )
+
+
+# ---------------------------------------------------------------------------------- datasets
+
+
+def babble(
+    config: BabbleConfig = PAPER,
+    *,
+    model_path: str | Path | None = None,
+    xml: str | None = None,
+    progress: bool = True,
+) -> list[dataset.Dataset]:
+    """Generates the babbling datasets of every domain and split in `config`.
+
+    Args:
+      config: babbling options.
+      model_path, xml: the MJCF (default: the committed model), as for `mjx_arm.load`.
+      progress: show a tqdm bar (trajectories).
+
+    Returns:
+      One `Dataset` per (domain, split), in order, all with the same task-space bounds (min/max
+      over every returned dataset's poses).
+    """
+    from tqdm.auto import tqdm
+
+    splits = config.splits()
+    total = len(config.domains) * sum(splits.values())
+    results = []
+    backend = resolve_backend(config.backend)
+    # One batch size for every split and domain: one compilation for the whole run.
+    chunk = min(config.chunk, max(splits.values()))
+    with tqdm(
+        total=total,
+        unit="traj",
+        disable=not progress or jax.process_index() != 0,
+        desc=f"babbling ({backend})",
+    ) as bar:
+        for domain in config.domains:
+            arm = arm_lib.load(model_path, domain, xml=xml)
+            sharded = ShardedRollout(arm) if backend == "mjx" else None
+            for split, n in splits.items():
+                bar.set_postfix_str(f"{domain}/{split}")
+                programs = make_programs(config, np.arange(n), domain=domain, split=split)
+                poses = simulate(
+                    arm,
+                    programs,
+                    backend=backend,
+                    chunk=chunk,
+                    progress=bar.update,
+                    sharded=sharded,
+                    fixed_size=True,
+                )
+                results.append(
+                    dataset.Dataset(
+                        pressures_bar=programs,
+                        poses=poses,
+                        pose_low=np.zeros(6, np.float32),
+                        pose_high=np.ones(6, np.float32),
+                        domain=arm.domain.name,
+                        domain_fields=dataclasses.asdict(arm.domain),
+                        model_hash=arm.model_hash,
+                        seed=config.seed,
+                        split=split,
+                        config=_config_dict(config, backend),
+                    )
+                )
+    low, high = dataset.workspace_bounds(*(d.poses for d in results))
+    return [d.with_bounds(low, high) for d in results]
+
+
+def _config_dict(config: BabbleConfig, backend: str) -> dict:
+    d = dataclasses.asdict(config)
+    d["domains"] = list(d["domains"])
+    d["backend"] = backend
+    return d
+
+
+def dataset_path(out_dir: str | Path, domain: str, split: str) -> Path:
+    """Where `run` writes a (domain, split) dataset."""
+    return Path(out_dir) / f"{domain}_{split}.npz"
+
+
+def run(
+    config: BabbleConfig,
+    out_dir: str | Path,
+    *,
+    model_path: str | Path | None = None,
+    xml: str | None = None,
+    progress: bool = True,
+) -> list[Path]:
+    """Generates the datasets of `config` and writes them to ``out_dir/<domain>_<split>.npz``.
+
+    Returns:
+      The paths written (none on processes other than 0 of a multi-host run).
+    """
+    datasets = babble(config, model_path=model_path, xml=xml, progress=progress)
+    if jax.process_index() != 0:
+        return []
+    return [dataset.save_dataset(dataset_path(out_dir, d.domain, d.split), d) for d in datasets]
+
+
+# ---------------------------------------------------------------------------------- command line
+
+
+def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
+    p = argparse.ArgumentParser(
+        prog="python -m mjx_arm.babble",
+        description="Simulate pseudo-random pressure programs and save babbling datasets.",
+    )
+    p.add_argument("--preset", choices=["paper"], help="paper: 50 + 3 x 60 s, both domains")
+    p.add_argument("--domain", default="both", help="source, constrained, aged, or both")
+    p.add_argument("--n", type=int, help="training trajectories per domain (default 50)")
+    p.add_argument("--n-val", type=int, help="validation trajectories per domain (default 3)")
+    p.add_argument("--duration", type=float, help="seconds per trajectory (default 60)")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--hold-min", type=float, help="shortest hold (s, default 0.5)")
+    p.add_argument("--hold-max", type=float, help="longest hold (s, default 3)")
+    p.add_argument("--backend", choices=BACKENDS, default="auto")
+    p.add_argument("--chunk", type=int, default=4096, help="trajectories per device call")
+    p.add_argument("--model", help="MJCF path (default: models/softarm.xml)")
+    p.add_argument("--out", default="out/babble", help="output folder")
+    p.add_argument("--distributed", action="store_true", help="call jax.distributed.initialize()")
+    p.add_argument("--cache-dir", help="JAX persistent compilation cache folder")
+    p.add_argument("--no-progress", action="store_true")
+    return p.parse_args(argv)
+
+
+def config_from_args(args: argparse.Namespace) -> BabbleConfig:
+    """Builds the BabbleConfig of parsed arguments (the preset first, then explicit options)."""
+    config = PAPER if args.preset == "paper" else BabbleConfig()
+    overrides = {
+        "seed": args.seed,
+        "backend": args.backend,
+        "chunk": args.chunk,
+        "domains": ("source", "constrained") if args.domain == "both" else (args.domain,),
+    }
+    for field, value in (
+        ("n_train", args.n),
+        ("n_val", args.n_val),
+        ("duration_s", args.duration),
+        ("hold_min_s", args.hold_min),
+        ("hold_max_s", args.hold_max),
+    ):
+        if value is not None:
+            overrides[field] = value
+    return dataclasses.replace(config, **overrides)
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    args = parse_args(argv)
+    if args.distributed:
+        jax.distributed.initialize()
+    if args.cache_dir:
+        jax.config.update("jax_compilation_cache_dir", args.cache_dir)
+    config = config_from_args(args)
+    start = time.perf_counter()
+    paths = run(config, args.out, model_path=args.model, progress=not args.no_progress)
+    for path in paths:
+        print(path)
+    if paths:
+        summary = {
+            "seconds": round(time.perf_counter() - start, 2),
+            "files": [str(p) for p in paths],
+        }
+        print(json.dumps(summary))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

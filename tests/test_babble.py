@@ -1,0 +1,248 @@
+"""Babbling programs, sharded MJX rollouts, and dataset files, on a 3-segment model (CPU, small)."""
+
+import mjx_arm  # noqa: I001  (before jax: it sets an XLA CPU flag)
+
+import dataclasses
+import os
+import zipfile
+
+import jax
+import numpy as np
+import pytest
+
+from mjx_arm import babble, dataset
+from mjx_arm.dataset import DatasetError, ModelHashMismatchError
+
+CONFIG = babble.BabbleConfig(n_train=3, n_val=1, duration_s=2.0, chunk=2, backend="c")
+
+
+@pytest.fixture(scope="module")
+def xml():
+    return mjx_arm.generate_xml(dataclasses.replace(mjx_arm.ArmParams(), n_segments=3))
+
+
+@pytest.fixture(scope="module")
+def arm(xml):
+    return mjx_arm.load(xml=xml, domain="source")
+
+
+@pytest.fixture(scope="module")
+def datasets(xml):
+    """Both domains, train + val, MuJoCo C backend."""
+    return babble.babble(CONFIG, xml=xml, progress=False)
+
+
+# ---------------------------------------------------------------------------------- programs
+
+
+def test_programs_shape_range_and_holds():
+    config = babble.BabbleConfig(duration_s=30.0)
+    p = babble.make_programs(config, np.arange(4))
+    assert p.shape == (4, 300, 3) and p.dtype == np.float32
+    assert p.min() >= 0.0 and p.max() <= mjx_arm.P_MAX_BAR
+    # Each chamber holds a target for 5..30 control periods (the last hold may be cut by T).
+    for chamber in p.transpose(0, 2, 1).reshape(-1, 300):
+        switches = np.flatnonzero(np.diff(chamber) != 0) + 1
+        runs = np.diff(np.concatenate([[0], switches]))
+        assert runs.min() >= 5 and runs.max() <= 30
+    # Chambers switch at different times (independent holds) and the cube is covered.
+    assert not np.array_equal(np.diff(p[0, :, 0]) != 0, np.diff(p[0, :, 1]) != 0)
+    assert p.min() < 0.5 and p.max() > 3.0
+
+
+def test_programs_deterministic_per_seed_and_index():
+    a = babble.make_programs(CONFIG, np.arange(5))
+    np.testing.assert_array_equal(a, babble.make_programs(CONFIG, np.arange(5)))
+    # Trajectory i does not depend on which others are drawn with it (chunking is invisible).
+    np.testing.assert_array_equal(a[[4, 1]], babble.make_programs(CONFIG, [4, 1]))
+    other_seed = babble.make_programs(dataclasses.replace(CONFIG, seed=1), np.arange(5))
+    other_split = babble.make_programs(CONFIG, np.arange(5), split="val")
+    other_domain = babble.make_programs(CONFIG, np.arange(5), domain="constrained")
+    for b in (other_seed, other_split, other_domain):
+        assert not np.array_equal(a, b)
+
+
+def test_config_checks():
+    with pytest.raises(ValueError):
+        babble.BabbleConfig(backend="gpu")
+    with pytest.raises(ValueError):
+        babble.BabbleConfig(hold_min_s=2.0, hold_max_s=1.0)
+    assert babble.PAPER.n_train == 50 and babble.PAPER.n_val == 3 and babble.PAPER.n_steps == 600
+
+
+def test_auto_backend_is_c_on_cpu():
+    assert jax.default_backend() == "cpu"
+    assert babble.resolve_backend("auto") == "c"
+    assert babble.resolve_backend("mjx") == "mjx"
+
+
+# ---------------------------------------------------------------------------------- rollouts
+
+
+def test_sharded_mjx_pads_and_agrees_with_c(arm):
+    """One device: a 3-program batch padded to 4, against MuJoCo C; chunked run is identical."""
+    programs = babble.make_programs(CONFIG, np.arange(3))
+    sharded = babble.ShardedRollout(arm)
+    assert sharded.n_devices == len(jax.devices()) == 1
+    assert babble.padded_size(3, 1) == 3 and babble.padded_size(3, 2) == 4
+    assert babble.padded_size(0, 4) == 4
+    padded = sharded.pad(programs, 4)
+    assert padded.shape == (4, CONFIG.n_steps, 3)
+    np.testing.assert_array_equal(padded[3], programs[2])
+    arr = sharded.shard(padded)
+    assert arr.sharding.spec == jax.sharding.PartitionSpec("batch")
+
+    poses, ok = sharded(programs, size=4)
+    assert poses.shape == (3, CONFIG.n_steps, 6) and poses.dtype == np.float32 and ok.all()
+    poses_c = babble.simulate(arm, programs, backend="c", chunk=2)
+    np.testing.assert_allclose(poses, poses_c, atol=2e-5)
+    # simulate() with chunks of 2 padded to 4 reuses the same compilation and gives the same data.
+    chunked = babble.simulate(arm, programs, backend="mjx", chunk=4, sharded=sharded)
+    np.testing.assert_allclose(chunked, poses, atol=1e-6)
+    # The arm moves: babbling reaches well beyond rest.
+    assert np.ptp(poses_c[..., :2]) > 5e-3
+
+
+def test_diverged_trajectories_are_reported():
+    ok = np.ones((3, 5), bool)
+    ok[1, 2:] = False
+    with pytest.raises(mjx_arm.SimulationDivergedError, match=r"\[11\]") as err:
+        babble._raise_if_diverged(ok, offset=10)
+    assert err.value.first_step.tolist() == [2]
+
+
+# ---------------------------------------------------------------------------------- datasets
+
+
+def test_babble_datasets_and_shared_bounds(datasets, arm):
+    assert [(d.domain, d.split) for d in datasets] == [
+        ("source", "train"),
+        ("source", "val"),
+        ("constrained", "train"),
+        ("constrained", "val"),
+    ]
+    low, high = dataset.workspace_bounds(*(d.poses for d in datasets))
+    for d in datasets:
+        assert d.poses.shape == (d.n_trajectories, CONFIG.n_steps, 6)
+        assert d.model_hash == arm.model_hash and d.seed == CONFIG.seed
+        np.testing.assert_array_equal(d.pose_low, low)
+        np.testing.assert_array_equal(d.pose_high, high)
+        p, x = d.normalised()
+        assert p.min() >= 0 and p.max() <= 1 and x.min() >= 0 and x.max() <= 1
+    # Same programs in both domains? No: separate streams.
+    assert not np.array_equal(datasets[0].pressures_bar, datasets[2].pressures_bar)
+    # The constrained arm lags: its poses differ under babbling although statics agree.
+    assert datasets[2].domain_fields["viscosity_scale"] == 10.0
+
+
+def test_normalise_round_trip():
+    low = np.array([-1, -2, -3, -1, -1, -1], np.float32)
+    high = np.array([1, 2, 3, 1, 1, 1], np.float32)
+    x = np.array([[0, 0, 0, 0, 0, 0], [1, 2, 3, 1, 1, 1]], np.float32)
+    # (0 - (-1)) / 2 = 0.5 on every axis; the upper bound maps to 1.
+    np.testing.assert_allclose(dataset.normalise_pose(x, low, high), [[0.5] * 6, [1.0] * 6])
+    np.testing.assert_allclose(
+        dataset.denormalise_pose(dataset.normalise_pose(x, low, high), low, high), x
+    )
+    np.testing.assert_allclose(dataset.normalise_pressure([3.5, 1.75, 0.0]), [1.0, 0.5, 0.0])
+    np.testing.assert_allclose(dataset.denormalise_pressure([1.0, 0.5]), [3.5, 1.75])
+
+
+def test_run_writes_files_that_round_trip(datasets, tmp_path, xml, arm):
+    d = datasets[0]
+    path = dataset.save_dataset(tmp_path / "a.npz", d)
+    back = dataset.load_dataset(path, expected_model_hash=arm.model_hash)
+    for field in ("pressures_bar", "poses", "pose_low", "pose_high"):
+        np.testing.assert_array_equal(getattr(back, field), getattr(d, field))
+        assert getattr(back, field).dtype == np.float32
+    assert (back.domain, back.split, back.seed, back.model_hash) == (
+        "source",
+        "train",
+        0,
+        d.model_hash,
+    )
+    assert back.domain_fields == d.domain_fields and back.config == d.config
+    assert back.duration_s == pytest.approx(CONFIG.duration_s)
+    assert sorted(os.listdir(tmp_path)) == ["a.npz"]  # no temporary left behind
+
+
+def test_cli_writes_one_file_per_domain_and_split(tmp_path, xml, monkeypatch):
+    model = tmp_path / "arm.xml"
+    model.write_text(xml)
+    argv = ["--domain", "source", "--n", "2", "--n-val", "1", "--duration", "1", "--seed", "3"]
+    argv += ["--model", str(model), "--out", str(tmp_path / "out"), "--no-progress"]
+    assert babble.main(argv) == 0
+    files = sorted(p.name for p in (tmp_path / "out").iterdir())
+    assert files == ["source_train.npz", "source_val.npz"]
+    d = dataset.load_dataset(tmp_path / "out" / "source_val.npz")
+    assert d.pressures_bar.shape == (1, 10, 3) and d.seed == 3 and d.split == "val"
+    expected = babble.make_programs(
+        dataclasses.replace(CONFIG, seed=3, duration_s=1.0), [0], split="val"
+    )
+    np.testing.assert_array_equal(d.pressures_bar, expected)
+
+
+def test_load_refuses_mismatched_model_hash(datasets, tmp_path):
+    path = dataset.save_dataset(tmp_path / "a.npz", datasets[0])
+    with pytest.raises(ModelHashMismatchError, match="expected 0123"):
+        dataset.load_dataset(path, expected_model_hash="0123")
+    assert issubclass(ModelHashMismatchError, DatasetError)
+
+
+def test_load_refuses_corrupt_files(datasets, tmp_path):
+    good = dataset.save_dataset(tmp_path / "good.npz", datasets[0]).read_bytes()
+    truncated = tmp_path / "truncated.npz"
+    truncated.write_bytes(good[: len(good) // 2])
+    garbage = tmp_path / "garbage.npz"
+    garbage.write_bytes(b"\x00garbage" * 100)
+    # Flip bytes inside the poses payload: the zip still opens, the CRC check must catch it.
+    flipped = bytearray(good)
+    with zipfile.ZipFile(tmp_path / "good.npz") as z:
+        info = z.getinfo("poses.npy")
+    start = info.header_offset + 30 + len(info.filename) + 200
+    flipped[start : start + 16] = bytes(16)
+    bitrot = tmp_path / "bitrot.npz"
+    bitrot.write_bytes(bytes(flipped))
+    for path in (truncated, garbage, bitrot, tmp_path / "missing.npz"):
+        with pytest.raises(DatasetError):
+            dataset.load_dataset(path)
+
+
+def test_load_refuses_bad_contents(datasets, tmp_path):
+    d = datasets[0]
+    nan = d.poses.copy()
+    nan[0, 1, 2] = np.nan
+    with pytest.raises(DatasetError, match="non-finite"):
+        dataset.save_dataset(tmp_path / "x.npz", dataclasses.replace(d, poses=nan))
+    # A file written by hand with a wrong shape and dtype is refused on load.
+    np.savez(
+        tmp_path / "bad.npz",
+        pressures_bar=d.pressures_bar.astype(np.float64),
+        poses=d.poses[:, :-1],
+        pose_low=d.pose_low,
+        pose_high=d.pose_high,
+        meta=np.array("{}"),
+    )
+    with pytest.raises(DatasetError, match="dtype float64.*poses has shape"):
+        dataset.load_dataset(tmp_path / "bad.npz")
+    np.savez(tmp_path / "other.npz", x=np.zeros(3))
+    with pytest.raises(DatasetError, match="missing keys"):
+        dataset.load_dataset(tmp_path / "other.npz")
+
+
+def test_atomic_write_leaves_no_partial_file(datasets, tmp_path, monkeypatch):
+    path = tmp_path / "a.npz"
+    dataset.save_dataset(path, datasets[0])
+    before = path.read_bytes()
+
+    def failing_savez(file, **arrays):
+        file.write(b"PK\x03\x04 half a zip")
+        raise OSError("disk full")
+
+    monkeypatch.setattr(dataset.np, "savez", failing_savez)
+    with pytest.raises(OSError, match="disk full"):
+        dataset.save_dataset(path, datasets[1])
+    with pytest.raises(OSError, match="disk full"):
+        dataset.save_dataset(tmp_path / "new.npz", datasets[1])
+    assert sorted(os.listdir(tmp_path)) == ["a.npz"]  # no temp file, no partial new file
+    assert path.read_bytes() == before  # the old file is untouched
