@@ -1,0 +1,279 @@
+"""Normalisation, windowing and hold-out of babbling data for the forward models and the CCGAN.
+
+The training-data interface is plain arrays: pressure programs `[N, T, 3]` (bar) and the poses they
+produced `[N, T, 6]` (tip position in m, then the unit d3 director), one pair per domain. The two
+domains are unpaired: trajectory i of D_s has nothing to do with trajectory i of D_c, so each domain
+is windowed and shuffled on its own.
+
+Normalisation follows the paper: pressures are divided by 3.5 bar; every pose axis is mapped to
+[0, 1] with per-axis bounds that span the workspace of both domains (`PoseBounds`).
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import numpy as np
+
+#: The valve's top pressure (bar); normalised pressure = pressure_bar / P_MAX_BAR.
+P_MAX_BAR = 3.5
+POSE_DIM = 6
+PRESSURE_DIM = 3
+#: A sample: normalised pressures (3) then normalised pose (6).
+SAMPLE_DIM = PRESSURE_DIM + POSE_DIM
+
+
+class PoseBounds(NamedTuple):
+    """Per-axis pose bounds used to map poses to [0, 1].
+
+    Attributes:
+      low: [6] lower bounds (m for position, unitless for d3).
+      high: [6] upper bounds; `high > low` on every axis.
+    """
+
+    low: np.ndarray
+    high: np.ndarray
+
+    def to_dict(self) -> dict:
+        return {"low": np.asarray(self.low).tolist(), "high": np.asarray(self.high).tolist()}
+
+    @classmethod
+    def from_dict(cls, d: dict) -> PoseBounds:
+        return cls(np.asarray(d["low"], np.float64), np.asarray(d["high"], np.float64))
+
+
+def pose_bounds(*poses: np.ndarray, margin: float = 0.05, min_span: float = 1e-3) -> PoseBounds:
+    """Bounds spanning every pose given (both domains), widened by `margin` of the span each side.
+
+    Args:
+      *poses: arrays [..., 6] (m, unitless).
+      margin: fraction of each axis' span added below and above.
+      min_span: smallest span per axis (keeps a flat axis from dividing by ~0).
+
+    Returns:
+      `PoseBounds` with [6] arrays.
+    """
+    flat = np.concatenate([np.asarray(p, np.float64).reshape(-1, POSE_DIM) for p in poses])
+    low, high = flat.min(0), flat.max(0)
+    span = np.maximum(high - low, min_span)
+    mid = 0.5 * (low + high)
+    half = 0.5 * span * (1.0 + 2.0 * margin)
+    return PoseBounds(mid - half, mid + half)
+
+
+def normalise_pressure(pressure_bar):
+    """[..., 3] bar -> [..., 3] in [0, 1] (pressure / 3.5 bar)."""
+    return pressure_bar / P_MAX_BAR
+
+
+def denormalise_pressure(pressure_norm):
+    """[..., 3] normalised -> [..., 3] bar."""
+    return pressure_norm * P_MAX_BAR
+
+
+def normalise_pose(pose, bounds: PoseBounds):
+    """[..., 6] (m, unitless) -> [..., 6] in [0, 1] inside the bounds."""
+    low, high = np.asarray(bounds.low), np.asarray(bounds.high)
+    return (pose - low) / (high - low)
+
+
+def denormalise_pose(pose_norm, bounds: PoseBounds):
+    """[..., 6] normalised -> [..., 6] (m, unitless)."""
+    low, high = np.asarray(bounds.low), np.asarray(bounds.high)
+    return pose_norm * (high - low) + low
+
+
+def check_domain_arrays(pressures_bar, poses, name: str = "data") -> tuple[np.ndarray, np.ndarray]:
+    """Validates one domain's arrays; returns them as float32 `[N, T, 3]`, `[N, T, 6]`."""
+    p = np.asarray(pressures_bar, np.float32)
+    x = np.asarray(poses, np.float32)
+    if p.ndim != 3 or p.shape[-1] != PRESSURE_DIM:
+        raise ValueError(f"{name}: pressures must be [N, T, 3], got {p.shape}")
+    if x.shape != p.shape[:2] + (POSE_DIM,):
+        raise ValueError(f"{name}: poses must be [N, T, 6] matching pressures, got {x.shape}")
+    if not (np.isfinite(p).all() and np.isfinite(x).all()):
+        raise ValueError(f"{name}: non-finite values")
+    return p, x
+
+
+def samples(pressures_bar, poses, bounds: PoseBounds) -> np.ndarray:
+    """Normalised samples `[..., 9]`: pressure / 3.5 (3) then pose in [0, 1] (6)."""
+    return np.concatenate(
+        [normalise_pressure(pressures_bar), normalise_pose(poses, bounds)], -1
+    ).astype(np.float32)
+
+
+def previous_poses(poses_norm: np.ndarray, rest_pose_norm: np.ndarray | None = None) -> np.ndarray:
+    """The pose before each command: `[N, T, 6]` -> `[N, T, 6]`, shifted by one step.
+
+    Step 0 gets `rest_pose_norm` [6] (the arm starts at rest) or, when None, the trajectory's own
+    first pose.
+    """
+    first = (
+        poses_norm[:, :1]
+        if rest_pose_norm is None
+        else np.broadcast_to(np.asarray(rest_pose_norm, poses_norm.dtype), poses_norm[:, :1].shape)
+    )
+    return np.concatenate([first, poses_norm[:, :-1]], 1)
+
+
+def windows(x: np.ndarray, length: int, stride: int | None = None) -> np.ndarray:
+    """Cuts aligned windows from every trajectory.
+
+    Args:
+      x: [N, T, D] trajectories.
+      length: window length L (control steps), 1 <= L <= T.
+      stride: step between window starts (default L, i.e. non-overlapping).
+
+    Returns:
+      [N * W, L, D] windows, W = (T - L) // stride + 1, trajectory-major.
+    """
+    n, t, d = x.shape
+    stride = length if stride is None else stride
+    if not 1 <= length <= t:
+        raise ValueError(f"window length {length} must be in [1, T={t}]")
+    starts = np.arange(0, t - length + 1, stride)
+    idx = starts[:, None] + np.arange(length)[None]
+    return x[:, idx].reshape(n * len(starts), length, d)
+
+
+class DomainSplit(NamedTuple):
+    """One domain, normalised, split into training windows and held-out trajectories.
+
+    Attributes:
+      train: [M, L, 9] training windows (pressure 3, pose 6; normalised).
+      train_prev_pose: [M, L, 6] the normalised pose before each step of `train`.
+      val: [V, T, 9] held-out whole trajectories.
+      val_prev_pose: [V, T, 6].
+    """
+
+    train: np.ndarray
+    train_prev_pose: np.ndarray
+    val: np.ndarray
+    val_prev_pose: np.ndarray
+
+
+def split_domain(
+    pressures_bar,
+    poses,
+    bounds: PoseBounds,
+    window_length: int,
+    n_val: int,
+    stride: int | None = None,
+    rest_pose=None,
+    name: str = "data",
+) -> DomainSplit:
+    """Normalises one domain, holds out its last `n_val` trajectories, windows the rest.
+
+    Args:
+      pressures_bar: [N, T, 3] commands (bar).
+      poses: [N, T, 6] poses (m, unitless).
+      bounds: pose bounds shared by both domains.
+      window_length: L, control steps per training window.
+      n_val: trajectories held out (N - n_val >= 1).
+      stride: window stride (default L).
+      rest_pose: [6] pose at rest (m, unitless) or None (use each trajectory's first pose).
+
+    Returns:
+      `DomainSplit`.
+    """
+    p, x = check_domain_arrays(pressures_bar, poses, name)
+    n = p.shape[0]
+    if not 0 <= n_val < n:
+        raise ValueError(f"{name}: n_val={n_val} must leave at least one of {n} trajectories")
+    s = samples(p, x, bounds)
+    rest = None if rest_pose is None else normalise_pose(np.asarray(rest_pose), bounds)
+    prev = previous_poses(s[..., PRESSURE_DIM:], rest).astype(np.float32)
+    tr, va = slice(0, n - n_val), slice(n - n_val, n)
+    return DomainSplit(
+        train=windows(s[tr], window_length, stride),
+        train_prev_pose=windows(prev[tr], window_length, stride),
+        val=s[va],
+        val_prev_pose=prev[va],
+    )
+
+
+class TranslationData(NamedTuple):
+    """Both domains, ready for `ccgan.train.make_train`.
+
+    Attributes:
+      source: D_s split.
+      constrained: D_c split.
+      bounds: the shared pose bounds.
+    """
+
+    source: DomainSplit
+    constrained: DomainSplit
+    bounds: PoseBounds
+
+
+def prepare(
+    pressures_s,
+    poses_s,
+    pressures_c,
+    poses_c,
+    window_length: int,
+    n_val: int,
+    stride: int | None = None,
+    bounds: PoseBounds | None = None,
+    rest_pose_s=None,
+    rest_pose_c=None,
+) -> TranslationData:
+    """Normalises, holds out and windows both (unpaired) domains.
+
+    Args:
+      pressures_s, poses_s: D_s arrays [N_s, T_s, 3] (bar) and [N_s, T_s, 6].
+      pressures_c, poses_c: D_c arrays [N_c, T_c, 3] and [N_c, T_c, 6]; N_c, T_c may differ.
+      window_length: L (control steps).
+      n_val: trajectories held out per domain.
+      stride: window stride (default L).
+      bounds: pose bounds; default spans the poses of both domains (`pose_bounds`).
+      rest_pose_s, rest_pose_c: [6] rest poses or None.
+
+    Returns:
+      `TranslationData`.
+    """
+    if bounds is None:
+        bounds = pose_bounds(poses_s, poses_c)
+    kw = dict(window_length=window_length, n_val=n_val, stride=stride)
+    return TranslationData(
+        source=split_domain(pressures_s, poses_s, bounds, rest_pose=rest_pose_s, name="D_s", **kw),
+        constrained=split_domain(
+            pressures_c, poses_c, bounds, rest_pose=rest_pose_c, name="D_c", **kw
+        ),
+        bounds=bounds,
+    )
+
+
+def random_held_programs(
+    rng: np.random.Generator,
+    n: int,
+    steps: int,
+    max_hold: int = 5,
+    p_max_bar: float = P_MAX_BAR,
+) -> np.ndarray:
+    """Random babbling programs: uniform pressures held for 1..max_hold control steps.
+
+    Args:
+      rng: numpy generator.
+      n: programs.
+      steps: T, control steps per program (10 Hz).
+      max_hold: longest hold (steps).
+      p_max_bar: top pressure (bar).
+
+    Returns:
+      [n, steps, 3] commands (bar).
+    """
+    out = np.zeros((n, steps, 3))
+    for i in range(n):
+        t = 0
+        while t < steps:
+            hold = int(rng.integers(1, max_hold + 1))
+            out[i, t : t + hold] = rng.uniform(0.0, p_max_bar, 3)
+            t += hold
+    return out
+
+
+def simulate(arm, pressures_bar: np.ndarray) -> np.ndarray:
+    """Poses [N, T, 6] of programs [N, T, 3] (bar) on an `mjx_arm.Arm`, with MuJoCo C."""
+    return np.asarray(arm.rollout(pressures_bar, backend="c"), np.float32)

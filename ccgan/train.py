@@ -1,0 +1,546 @@
+"""CCGAN-GP training (and the WCGAN-GP baseline): pure step/epoch functions and a thin driver.
+
+`make_train(config, data, forward_c_params)` returns a pure `train(key) -> (state, metrics)` that
+runs every epoch as one `lax.scan`, so several seeds train at once with
+`jax.jit(jax.vmap(train))(keys)`. `train_and_evaluate` drives the same epoch function in chunks
+with tqdm, a CSV log and atomic checkpoints; a resumed run ends with exactly the parameters of an
+uninterrupted one because every epoch's randomness is `fold_in(key, epoch)`.
+
+One train step updates all four networks: first both critics (Wasserstein loss + gradient
+penalty), then both generators against the updated critics (adversarial + lambda_c cycle +
+identity + lambda_f feedback). The feedback term runs the frozen forward model F_c open-loop on
+G_c's commands, each held k control periods (adaptive time stretching), and compares every k-th
+pose with the D_s target. Every `stretch_every` epochs, k is re-chosen from `stretch_choices` by
+the tracking error on held-out D_s trajectories.
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import dataclasses
+import json
+import os
+from pathlib import Path
+from typing import Any, NamedTuple
+
+import flax
+import jax
+import jax.numpy as jnp
+import numpy as np
+import optax
+from jax.sharding import Mesh, NamedSharding
+from jax.sharding import PartitionSpec as P
+
+from ccgan import checkpoint, losses
+from ccgan.data import PRESSURE_DIM, TranslationData
+from ccgan.forward import ForwardConfig
+from ccgan.models import Critic, ForwardModel, Generator, forward_stretched
+
+
+@dataclasses.dataclass(frozen=True)
+class TrainConfig:
+    """CCGAN-GP settings; defaults are the paper's where it gives one."""
+
+    #: Passes over the training windows (paper: 550).
+    epochs: int = 550
+    #: Windows per step and domain (paper: 10), split over local devices.
+    batch_size: int = 10
+    #: Control steps per training window (not in the paper; >= 2 for the instance-norm critic).
+    window_length: int = 10
+    #: Step between window starts (0 = window_length, non-overlapping).
+    window_stride: int = 0
+    #: Trajectories per domain held out for validation (paper: 3).
+    n_val: int = 3
+    #: Generator learning rate (paper: 1e-4).
+    lr_generator: float = 1e-4
+    #: Critic learning rate (paper: 2e-4).
+    lr_critic: float = 2e-4
+    #: AdamW betas (paper: 0.5, 0.999).
+    beta1: float = 0.5
+    beta2: float = 0.999
+    #: AdamW decoupled weight decay (paper: unstated; PyTorch's AdamW default 1e-2).
+    weight_decay: float = 1e-2
+    #: Cycle-loss weight lambda_c (paper code: 10).
+    lambda_cycle: float = 10.0
+    #: Identity-loss weight (paper: 1).
+    lambda_identity: float = 1.0
+    #: Feedback-loss weight lambda_f (paper code: 5).
+    lambda_feedback: float = 5.0
+    #: Gradient-penalty weight (paper code: 10).
+    lambda_gp: float = 10.0
+    #: Hold factors k (control periods per translated command) to choose from (paper: 5..30).
+    stretch_choices: tuple[int, ...] = (5, 10, 15, 20, 25, 30)
+    #: Epochs between choices of k (the paper's N; also chosen once before training).
+    stretch_every: int = 10
+    #: WCGAN-GP baseline: one generator and one critic on D_c only, no cycle/identity loss.
+    baseline: bool = False
+    #: Epochs between checkpoints (also the driver's jitted chunk and tqdm tick).
+    checkpoint_every: int = 10
+    #: Generator LSTM width (paper: 32).
+    gen_hidden: int = 32
+    #: Generator FC width (paper: 128).
+    gen_fc: int = 128
+    #: Critic Conv1D widths (five layers).
+    critic_features: tuple[int, ...] = (32, 64, 64, 128, 128)
+
+    @property
+    def stride(self) -> int:
+        return self.window_stride or self.window_length
+
+    @property
+    def k_max(self) -> int:
+        return max(self.stretch_choices)
+
+    def to_dict(self) -> dict:
+        return json.loads(json.dumps(dataclasses.asdict(self)))
+
+
+@flax.struct.dataclass
+class TrainState:
+    """Everything that changes during training.
+
+    Attributes:
+      params: {"g_c", "c_c"} (+ {"g_s", "c_s"} unless baseline) Flax variables.
+      opt_gen: AdamW state of the generators.
+      opt_critic: AdamW state of the critics.
+      k: current hold factor (int32 scalar).
+      epoch: epochs done (int32 scalar).
+    """
+
+    params: dict
+    opt_gen: Any
+    opt_critic: Any
+    k: jnp.ndarray
+    epoch: jnp.ndarray
+
+
+class Trainer(NamedTuple):
+    """Pure functions of one configured run.
+
+    init(key) -> TrainState;
+    run_epochs(state, key, start_epoch, n_epochs: static int) -> (state, metrics {name: [n]});
+    validation_errors(state) -> [len(stretch_choices)] mean tip error (cm) per k.
+    """
+
+    init: Any
+    run_epochs: Any
+    validation_errors: Any
+
+
+METRICS = (
+    "critic_c",
+    "critic_s",
+    "gp_c",
+    "gp_s",
+    "adversarial",
+    "cycle",
+    "identity",
+    "feedback",
+    "generator_total",
+    "critic_total",
+    "k",
+    "val_error_cm",
+)
+
+
+def _optimizer(lr: float, config: TrainConfig):
+    return optax.adamw(lr, b1=config.beta1, b2=config.beta2, weight_decay=config.weight_decay)
+
+
+def _mesh_constraint(batch_size: int):
+    """Shards the batch axis over local devices when there are several and they divide it."""
+    devices = jax.local_devices()
+    if len(devices) < 2 or batch_size % len(devices):
+        return lambda x: x
+    sharding = NamedSharding(Mesh(np.array(devices), ("batch",)), P("batch"))
+    return lambda x: jax.lax.with_sharding_constraint(x, sharding)
+
+
+def make_trainer(
+    config: TrainConfig,
+    data: TranslationData,
+    forward_c_params,
+    forward_model: ForwardModel | None = None,
+) -> Trainer:
+    """Builds the pure training functions.
+
+    Args:
+      config: settings.
+      data: `ccgan.data.prepare(...)` output (window length must equal config.window_length).
+      forward_c_params: trained F_c variables (frozen during training).
+      forward_model: F_c's module (default `ForwardModel()`).
+
+    Returns:
+      `Trainer`.
+    """
+    fwd = forward_model or ForwardModel()
+    gen = Generator(hidden=config.gen_hidden, fc=config.gen_fc)
+    critic = Critic(features=config.critic_features)
+    tx_gen = _optimizer(config.lr_generator, config)
+    tx_critic = _optimizer(config.lr_critic, config)
+    cycle = not config.baseline
+    shard = _mesh_constraint(config.batch_size)
+
+    # The generator's input domain: D_s for CCGAN; D_c only for the WCGAN-GP baseline.
+    src = data.constrained if config.baseline else data.source
+    x_in, prev_in = jnp.asarray(src.train), jnp.asarray(src.train_prev_pose)
+    x_c = jnp.asarray(data.constrained.train)
+    if x_in.shape[1] != config.window_length or x_c.shape[1] != config.window_length:
+        raise ValueError("data windows do not match config.window_length")
+    n_in, n_c = x_in.shape[0], x_c.shape[0]
+    batch = config.batch_size
+    steps = min(n_in, n_c) // batch
+    if steps < 1:
+        raise ValueError(f"too few windows ({n_in}, {n_c}) for batch size {batch}")
+    val = jnp.asarray(data.source.val)
+    val_pose0 = jnp.asarray(data.source.val_prev_pose)[:, 0]
+    low, high = jnp.asarray(data.bounds.low), jnp.asarray(data.bounds.high)
+    choices = jnp.asarray(config.stretch_choices, jnp.int32)
+
+    def validation_errors(state: TrainState):
+        """Mean tip error (cm) on held-out D_s trajectories for each k in stretch_choices."""
+        commands = gen.apply(state.params["g_c"], val)[..., :PRESSURE_DIM]
+
+        def for_k(k):
+            pred = forward_stretched(fwd, forward_c_params, commands, val_pose0, k, config.k_max)
+            span = high - low
+            err = losses.position_error_cm(pred * span + low, val[..., PRESSURE_DIM:] * span + low)
+            return err.mean()
+
+        return jax.vmap(for_k)(choices)
+
+    def choose_k(state: TrainState):
+        errs = validation_errors(state)
+        best = jnp.argmin(errs)
+        return state.replace(k=choices[best]), errs[best]
+
+    def init(key) -> TrainState:
+        k_gen, k_critic = jax.random.split(key)
+        # One vmapped init per network type: one compiled initialiser serves both domains (the
+        # input shapes are equal) and compiles twice as fast as two separate inits.
+        n_nets = 2 if cycle else 1
+        gens = jax.vmap(gen.init, in_axes=(0, None))(jax.random.split(k_gen, n_nets), x_in[:1])
+        critics = jax.vmap(critic.init, in_axes=(0, None))(
+            jax.random.split(k_critic, n_nets), x_c[:1]
+        )
+        pick = lambda tree, i: jax.tree.map(lambda a: a[i], tree)  # noqa: E731
+        params = {"g_c": pick(gens, 0), "c_c": pick(critics, 0)}
+        if cycle:
+            params["g_s"], params["c_s"] = pick(gens, 1), pick(critics, 1)
+        gp = {n: params[n] for n in params if n.startswith("g_")}
+        cp = {n: params[n] for n in params if n.startswith("c_")}
+        state = TrainState(
+            params=params,
+            opt_gen=tx_gen.init(gp),
+            opt_critic=tx_critic.init(cp),
+            k=choices[0],
+            epoch=jnp.zeros((), jnp.int32),
+        )
+        # Like the authors' code, pick k once before training, with the untrained generator.
+        return choose_k(state)[0]
+
+    def both_halves(fn, params, a, b):
+        """fn(params, concat(a, b)) split back into its two halves (one traced call, not two)."""
+        out = fn(params, jnp.concatenate([a, b], 0))
+        return out[: a.shape[0]], out[a.shape[0] :]
+
+    def critic_terms(params, real, fake, key):
+        """Wasserstein loss and gradient penalty of one critic on real/fake [B, L, 9]."""
+        real_score, fake_score = both_halves(critic.apply, params, real, fake)
+        score = lambda x: critic.apply(params, x)  # noqa: E731
+        return (
+            losses.critic_loss(real_score, fake_score),
+            losses.gradient_penalty(score, real, fake, key),
+        )
+
+    def critic_losses(cparams, gparams, xs, xc, key):
+        k_c, k_s = jax.random.split(key)
+        fake_c = jax.lax.stop_gradient(gen.apply(gparams["g_c"], xs))
+        out = {}
+        out["critic_c"], out["gp_c"] = critic_terms(cparams["c_c"], xc, fake_c, k_c)
+        total = out["critic_c"] + config.lambda_gp * out["gp_c"]
+        if cycle:
+            fake_s = jax.lax.stop_gradient(gen.apply(gparams["g_s"], xc))
+            out["critic_s"], out["gp_s"] = critic_terms(cparams["c_s"], xs, fake_s, k_s)
+            total = total + out["critic_s"] + config.lambda_gp * out["gp_s"]
+        out["critic_total"] = total
+        return total, out
+
+    def generator_losses(gparams, cparams, xs, prev_s, xc, k):
+        if cycle:
+            # G_c on D_s (translation) and on D_c (identity); G_s likewise.
+            fake_c, same_c = both_halves(gen.apply, gparams["g_c"], xs, xc)
+            fake_s, same_s = both_halves(gen.apply, gparams["g_s"], xc, xs)
+            back_s = gen.apply(gparams["g_s"], fake_c)
+            back_c = gen.apply(gparams["g_c"], fake_s)
+        else:
+            fake_c = gen.apply(gparams["g_c"], xs)
+        adv = losses.generator_adversarial_loss(critic.apply(cparams["c_c"], fake_c))
+        pred = forward_stretched(
+            fwd, forward_c_params, fake_c[..., :PRESSURE_DIM], prev_s[:, 0], k, config.k_max
+        )
+        out = {"feedback": losses.feedback_loss(pred, xs[..., PRESSURE_DIM:])}
+        if cycle:
+            adv = adv + losses.generator_adversarial_loss(critic.apply(cparams["c_s"], fake_s))
+            out["cycle"] = losses.cycle_loss(back_s, xs) + losses.cycle_loss(back_c, xc)
+            out["identity"] = losses.identity_loss(same_s, xs) + losses.identity_loss(same_c, xc)
+        out["adversarial"] = adv
+        total = adv + config.lambda_feedback * out["feedback"]
+        if cycle:
+            total = total + config.lambda_cycle * out["cycle"]
+            total = total + config.lambda_identity * out["identity"]
+        out["generator_total"] = total
+        return total, out
+
+    def train_step(state: TrainState, inputs):
+        """One critic update then one generator update; inputs = (idx_in [B], idx_c [B], key)."""
+        idx_in, idx_c, key = inputs
+        xs, prev_s, xc = shard(x_in[idx_in]), shard(prev_in[idx_in]), shard(x_c[idx_c])
+        gp = {n: state.params[n] for n in state.params if n.startswith("g_")}
+        cp = {n: state.params[n] for n in state.params if n.startswith("c_")}
+
+        (_, c_out), c_grads = jax.value_and_grad(critic_losses, has_aux=True)(cp, gp, xs, xc, key)
+        c_updates, opt_critic = tx_critic.update(c_grads, state.opt_critic, cp)
+        cp = optax.apply_updates(cp, c_updates)
+
+        (_, g_out), g_grads = jax.value_and_grad(generator_losses, has_aux=True)(
+            gp, cp, xs, prev_s, xc, state.k
+        )
+        g_updates, opt_gen = tx_gen.update(g_grads, state.opt_gen, gp)
+        gp = optax.apply_updates(gp, g_updates)
+
+        state = state.replace(params={**gp, **cp}, opt_gen=opt_gen, opt_critic=opt_critic)
+        return state, {**c_out, **g_out}
+
+    def epoch_fn(state: TrainState, epoch, key):
+        ek = jax.random.fold_in(key, epoch)
+        k_in, k_c, k_steps = jax.random.split(ek, 3)
+        idx_in = jax.random.permutation(k_in, n_in)[: steps * batch].reshape(steps, batch)
+        idx_c = jax.random.permutation(k_c, n_c)[: steps * batch].reshape(steps, batch)
+        state, out = jax.lax.scan(
+            train_step, state, (idx_in, idx_c, jax.random.split(k_steps, steps))
+        )
+        metrics = {name: v.mean() for name, v in out.items()}
+        # `epoch` comes from the scan's xs, so under vmap over seeds the predicate stays unbatched
+        # and this stays a real branch (k is evaluated every stretch_every epochs, not every one).
+        state, val_err = jax.lax.cond(
+            (epoch + 1) % config.stretch_every == 0,
+            choose_k,
+            lambda s: (s, jnp.array(jnp.nan, jnp.float32)),
+            state,
+        )
+        metrics["k"] = state.k.astype(jnp.float32)
+        metrics["val_error_cm"] = val_err
+        for name in METRICS:
+            metrics.setdefault(name, jnp.array(jnp.nan, jnp.float32))
+        return state.replace(epoch=epoch + 1), metrics
+
+    def run_epochs(state: TrainState, key, start_epoch, n_epochs: int):
+        epochs = start_epoch + jnp.arange(n_epochs, dtype=jnp.int32)
+        return jax.lax.scan(lambda s, e: epoch_fn(s, e, key), state, epochs)
+
+    return Trainer(init=init, run_epochs=run_epochs, validation_errors=validation_errors)
+
+
+def make_train(
+    config: TrainConfig,
+    data: TranslationData,
+    forward_c_params,
+    forward_model: ForwardModel | None = None,
+):
+    """Pure `train(key) -> (TrainState, metrics {name: [epochs]})` running every epoch in one scan.
+
+    Seeds in parallel: `jax.jit(jax.vmap(make_train(config, data, fc)))(jax.random.split(key, n))`.
+    """
+    trainer = make_trainer(config, data, forward_c_params, forward_model)
+
+    def train(key):
+        init_key, run_key = jax.random.split(key)
+        state = trainer.init(init_key)
+        return trainer.run_epochs(state, run_key, jnp.int32(0), config.epochs)
+
+    return train
+
+
+def data_fingerprint(data: TranslationData) -> str:
+    return checkpoint.fingerprint(
+        data.source.train,
+        data.source.val,
+        data.constrained.train,
+        data.constrained.val,
+        data.bounds.low,
+        data.bounds.high,
+    )
+
+
+def _write_csv(path: Path, rows: list[dict]) -> None:
+    tmp = path.with_suffix(".tmp")
+    with open(tmp, "w", newline="") as f:
+        w = csv.DictWriter(f, fieldnames=["seed", "epoch", *METRICS])
+        w.writeheader()
+        w.writerows(rows)
+    os.replace(tmp, path)
+
+
+def _read_csv(path: Path) -> list[dict]:
+    if not path.exists():
+        return []
+    with open(path, newline="") as f:
+        return list(csv.DictReader(f))
+
+
+def train_and_evaluate(
+    config: TrainConfig,
+    data: TranslationData,
+    forward_c_params,
+    workdir: str | os.PathLike,
+    seeds: tuple[int, ...] = (0,),
+    forward_model: ForwardModel | None = None,
+    resume: bool = True,
+    max_chunks: int | None = None,
+    progress: bool = True,
+):
+    """Trains one or several seeds (vmapped), with a CSV log, checkpoints and a translator file.
+
+    Files in `workdir`: `state.ckpt` (stacked TrainState of every seed, every checkpoint_every
+    epochs), `metrics.csv` (one row per seed and epoch, every loss term), `translator_seed{s}.ckpt`
+    and `translator.ckpt` (first seed) for `ccgan.load_translator`.
+
+    Args:
+      config, data, forward_c_params, forward_model: as `make_trainer`.
+      workdir: output folder.
+      seeds: PRNG seeds, trained together with vmap.
+      resume: continue from `workdir/state.ckpt` if present (it must match config, data and seeds).
+      max_chunks: stop after this many chunks (to test resumption); None runs to the end.
+      progress: show a tqdm bar over chunks.
+
+    Returns:
+      (state with a leading seed axis, rows of the metrics CSV).
+    """
+    from tqdm.auto import tqdm
+
+    workdir = Path(workdir)
+    workdir.mkdir(parents=True, exist_ok=True)
+    trainer = make_trainer(config, data, forward_c_params, forward_model)
+    keys = jax.vmap(jax.random.PRNGKey)(jnp.asarray(seeds))
+    init_keys, run_keys = jnp.swapaxes(jax.vmap(jax.random.split)(keys), 0, 1)
+    state = jax.jit(jax.vmap(trainer.init))(init_keys)
+    meta = {"config": config.to_dict(), "data": data_fingerprint(data), "seeds": list(seeds)}
+    ckpt_path, csv_path = workdir / "state.ckpt", workdir / "metrics.csv"
+    rows: list[dict] = []
+    if resume and ckpt_path.exists():
+        state, _ = checkpoint.load(ckpt_path, target=state, expect=meta)
+        done = int(np.asarray(state.epoch)[0])
+        rows = [r for r in _read_csv(csv_path) if int(r["epoch"]) <= done]
+    done = int(np.asarray(state.epoch)[0])
+
+    chunk = max(1, config.checkpoint_every)
+    run = jax.jit(jax.vmap(trainer.run_epochs, in_axes=(0, 0, None, None)), static_argnums=3)
+    starts = list(range(done, config.epochs, chunk))
+    if max_chunks is not None:
+        starts = starts[:max_chunks]
+    bar = tqdm(total=config.epochs, initial=done, unit="epoch", disable=not progress, desc="ccgan")
+    for start in starts:
+        n = min(chunk, config.epochs - start)
+        state, metrics = run(state, run_keys, jnp.int32(start), n)
+        metrics = jax.device_get(metrics)
+        for s_i, seed in enumerate(seeds):
+            for e in range(n):
+                row = {"seed": seed, "epoch": start + e + 1}
+                row.update({m: float(metrics[m][s_i, e]) for m in METRICS})
+                rows.append(row)
+        checkpoint.save(ckpt_path, jax.device_get(state), meta | {"epoch": start + n})
+        _write_csv(csv_path, rows)
+        last = {m: float(np.nanmean(metrics[m][:, -1])) for m in ("generator_total", "k")}
+        bar.set_postfix(last)
+        bar.update(n)
+    bar.close()
+
+    if int(np.asarray(state.epoch)[0]) >= config.epochs:
+        from ccgan.translator import save_translator
+
+        for s_i, seed in enumerate(seeds):
+            one = jax.tree.map(lambda x, i=s_i: np.asarray(x)[i], state)
+            names = [f"translator_seed{seed}.ckpt"] + (["translator.ckpt"] if s_i == 0 else [])
+            for name in names:
+                save_translator(
+                    workdir / name,
+                    one.params["g_c"],
+                    int(one.k),
+                    data.bounds,
+                    config,
+                    forward_c_params,
+                    forward_model,
+                )
+    return state, rows
+
+
+def load_npz(path: str | os.PathLike) -> tuple[np.ndarray, np.ndarray]:
+    """(pressures [N, T, 3] bar, poses [N, T, 6]) from an .npz with keys "pressures", "poses"."""
+    with np.load(path) as f:
+        return np.asarray(f["pressures"]), np.asarray(f["poses"])
+
+
+def main(argv=None) -> None:
+    """CLI: `python -m ccgan.train --source S.npz --constrained C.npz --workdir DIR [...]`."""
+    from ccgan import data as data_lib
+    from ccgan import forward as forward_lib
+
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--source", required=True, help="D_s babbling .npz (pressures, poses)")
+    parser.add_argument("--constrained", required=True, help="D_c babbling .npz")
+    parser.add_argument("--workdir", default="results/ccgan/run")
+    parser.add_argument("--seeds", type=int, nargs="+", default=[0])
+    parser.add_argument("--forward-epochs", type=int, default=ForwardConfig.epochs)
+    parser.add_argument("--no-resume", action="store_true")
+    for f in dataclasses.fields(TrainConfig):
+        flag = "--" + f.name.replace("_", "-")
+        if f.type in ("bool", bool):
+            parser.add_argument(flag, action="store_true", default=f.default)
+        elif "tuple" in str(f.type):
+            parser.add_argument(flag, type=int, nargs="+", default=list(f.default))
+        else:
+            typ = {"int": int, "float": float}.get(str(f.type), type(f.default))
+            parser.add_argument(flag, type=typ, default=f.default)
+    args = parser.parse_args(argv)
+    config = TrainConfig(
+        **{
+            f.name: tuple(getattr(args, f.name))
+            if isinstance(getattr(args, f.name), list)
+            else getattr(args, f.name)
+            for f in dataclasses.fields(TrainConfig)
+        }
+    )
+    ps, xs = load_npz(args.source)
+    pc, xc = load_npz(args.constrained)
+    data = data_lib.prepare(ps, xs, pc, xc, config.window_length, config.n_val, config.stride)
+    workdir = Path(args.workdir)
+    fconf = forward_lib.ForwardConfig(epochs=args.forward_epochs)
+    f_meta = {"config": dataclasses.asdict(fconf), "data": data_fingerprint(data)}
+    fc_path = workdir / "forward_c.ckpt"
+    report = {}
+    if fc_path.exists() and not args.no_resume:
+        fc_params, _ = checkpoint.load(fc_path, expect=f_meta)
+    else:
+        # F_s is not used by the CCGAN; it is trained for the report, as in the paper.
+        for name, split in (("forward_s", data.source), ("forward_c", data.constrained)):
+            params, hist, metrics = forward_lib.train_forward(fconf, split, data.bounds)
+            checkpoint.save(workdir / f"{name}.ckpt", params, f_meta)
+            report[name] = metrics | {"final_loss": float(hist[-1])}
+            print(name, json.dumps(report[name]))
+        (workdir / "forward_metrics.json").write_text(json.dumps(report, indent=2))
+        fc_params, _ = checkpoint.load(fc_path, expect=f_meta)
+    train_and_evaluate(
+        config,
+        data,
+        fc_params,
+        workdir,
+        seeds=tuple(args.seeds),
+        resume=not args.no_resume,
+        forward_model=fconf.model,
+    )
+
+
+if __name__ == "__main__":
+    main()
