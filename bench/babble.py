@@ -65,8 +65,11 @@ def rates(batch: int, seconds: float, timestep_s: float, wall_s: float) -> dict:
     }
 
 
-def time_mjx(arm, programs: np.ndarray, devices, repeats: int) -> dict:
-    """Compile then run a sharded MJX rollout of programs [B, T, 3] on `devices`."""
+def time_mjx(arm, programs: np.ndarray, devices, repeats: int, budget_s: float) -> dict:
+    """Compile then run a sharded MJX rollout of programs [B, T, 3] on `devices`.
+
+    Runs up to `repeats` times, stopping once the runs took `budget_s` in all.
+    """
     sharded = babble.ShardedRollout(arm, devices)
     size = babble.padded_size(programs.shape[0], sharded.n_devices)
     start = time.perf_counter()
@@ -74,7 +77,7 @@ def time_mjx(arm, programs: np.ndarray, devices, repeats: int) -> dict:
     compile_s = time.perf_counter() - start
     commands = sharded.shard(sharded.pad(programs, size))
     walls = []
-    for _ in range(repeats):
+    while len(walls) < repeats and sum(walls) < budget_s:
         start = time.perf_counter()
         poses, ok = compiled(sharded.mjx_model, sharded.rest, commands)
         jax.block_until_ready((poses, ok))
@@ -84,10 +87,12 @@ def time_mjx(arm, programs: np.ndarray, devices, repeats: int) -> dict:
 
 
 def time_c(arm, programs: np.ndarray, repeats: int) -> dict:
+    """MuJoCo C on all cores, as babbling runs it (`Arm.rollout` in chunks of C_MAX_CHUNK)."""
+    arm.rollout(programs[:1, :1], backend="c")  # warm-up: first-call setup is not throughput
     walls = []
     for _ in range(repeats):
         start = time.perf_counter()
-        arm.rollout(programs, backend="c")
+        babble.simulate(arm, programs, backend="c", chunk=babble.C_MAX_CHUNK)
         walls.append(time.perf_counter() - start)
     return {"walls_s": walls, "wall_s": min(walls)}
 
@@ -148,26 +153,40 @@ def run_bench(args) -> dict:
         for label, devices in device_sets.items():
             row = {"batch": batch, "devices": len(devices)}
             try:
-                row.update(time_mjx(arm, programs, devices, args.repeats))
+                row.update(time_mjx(arm, programs, devices, args.repeats, args.budget))
                 row.update(rates(batch, args.seconds, arm.timestep_s, row["wall_s"]))
             except Exception as err:  # e.g. out of device memory: record it and go on
                 row["error"] = f"{type(err).__name__}: {str(err)[:300]}"
                 traceback.print_exc()
             result["mjx"].append(row)
-            print(f"mjx {label} B={batch}: " + _fmt(row))
+            print(f"mjx {label} B={batch}: " + _fmt(row), flush=True)
+            write(result, args.out)
         if batch <= args.c_max_batch or batch == min(args.sizes):
-            row = {"batch": batch, "threads": min(os.cpu_count() or 1, batch)}
+            threads = min(os.cpu_count() or 1, batch, babble.C_MAX_CHUNK)
+            row = {"batch": batch, "threads": threads}
             row.update(time_c(arm, programs, args.c_repeats))
             row.update(rates(batch, args.seconds, arm.timestep_s, row["wall_s"]))
             result["c"].append(row)
-            print(f"C   B={batch}: " + _fmt(row))
+            print(f"C   B={batch}: " + _fmt(row), flush=True)
+            write(result, args.out)
     if args.paper:
         backends = ["c"] if args.skip_mjx_paper else ["mjx", "c"]
         for backend in backends:
             row = time_paper(args, backend)
             result["paper"].append(row)
-            print(f"paper preset ({backend}): {row['wall_s']:.1f} s")
+            print(f"paper preset ({backend}): {row['wall_s']:.1f} s", flush=True)
+            write(result, args.out)
     return result
+
+
+def write(result: dict, out: str | Path) -> Path:
+    """Writes babble.json and babble.md to `out` (after every measurement: a run cut short by a
+    time limit still leaves what it measured)."""
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "babble.json").write_text(json.dumps(result, indent=2) + "\n")
+    (out / "babble.md").write_text(markdown(result))
+    return out
 
 
 def _fmt(row: dict) -> str:
@@ -228,8 +247,11 @@ def markdown(result: dict) -> str:
 def parse_args(argv=None) -> argparse.Namespace:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--sizes", default="1024,4096,16384,65536", help="comma-separated batch sizes")
-    p.add_argument("--seconds", type=float, default=2.0, help="simulated seconds per trajectory")
-    p.add_argument("--repeats", type=int, default=3, help="timed MJX runs per size (best kept)")
+    p.add_argument("--seconds", type=float, default=1.0, help="simulated seconds per trajectory")
+    p.add_argument(
+        "--repeats", type=int, default=3, help="most timed MJX runs per size (best kept)"
+    )
+    p.add_argument("--budget", type=float, default=20.0, help="stop repeating after this many s")
     p.add_argument("--c-repeats", type=int, default=1, help="timed MuJoCo C runs per size")
     p.add_argument("--c-max-batch", type=int, default=4096, help="largest MuJoCo C batch")
     p.add_argument("--domain", default="source")
@@ -257,10 +279,7 @@ def main(argv=None) -> int:
         jax.config.update("jax_compilation_cache_dir", args.cache_dir)
         jax.config.update("jax_persistent_cache_min_compile_time_secs", 1.0)
     result = run_bench(args)
-    out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
-    (out / "babble.json").write_text(json.dumps(result, indent=2) + "\n")
-    (out / "babble.md").write_text(markdown(result))
+    out = write(result, args.out)
     print(markdown(result))
     print(f"wrote {out / 'babble.md'} and {out / 'babble.json'}")
     return 0

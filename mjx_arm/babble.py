@@ -59,6 +59,9 @@ from mjx_arm import arm as arm_lib
 from mjx_arm import constants, dataset
 
 BACKENDS = ("auto", "mjx", "c")
+#: Largest MuJoCo C batch per call: `mujoco.rollout` returns every substep's full state
+#: ([B, 2500, nstate] float64 per 5 s slice), and a few hundred programs already fill every core.
+C_MAX_CHUNK = 256
 
 
 @dataclasses.dataclass(frozen=True)
@@ -298,7 +301,8 @@ def simulate(
       arm: the arm in its domain.
       programs_bar: [N, T, 3] commands (bar).
       backend: "mjx", "c" or "auto" (see `resolve_backend`).
-      chunk: programs per call; with mjx every chunk is padded to the same size (one compile).
+      chunk: programs per call; with mjx every chunk is padded to the same size (one compile);
+        with c at most C_MAX_CHUNK.
       progress: called with the number of trajectories finished after each chunk.
       sharded: a `ShardedRollout` of `arm` to reuse (mjx only); built when None.
       fixed_size: mjx only: pad every call to `chunk` (rounded up to the device count) even when
@@ -317,7 +321,7 @@ def simulate(
         sharded = sharded if sharded is not None else ShardedRollout(arm)
         size = padded_size(chunk if fixed_size else min(chunk, n), sharded.n_devices)
     else:
-        size = chunk
+        size = min(chunk, C_MAX_CHUNK)
     for start in range(0, n, size):
         stop = min(start + size, n)
         if backend == "mjx":

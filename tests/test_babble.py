@@ -4,6 +4,8 @@ import mjx_arm  # noqa: I001  (before jax: it sets an XLA CPU flag)
 
 import dataclasses
 import os
+import subprocess
+import sys
 import zipfile
 
 import jax
@@ -246,3 +248,27 @@ def test_atomic_write_leaves_no_partial_file(datasets, tmp_path, monkeypatch):
         dataset.save_dataset(tmp_path / "new.npz", datasets[1])
     assert sorted(os.listdir(tmp_path)) == ["a.npz"]  # no temp file, no partial new file
     assert path.read_bytes() == before  # the old file is untouched
+
+
+def test_two_devices_pad_shard_and_match_c(tmp_path, xml):
+    """Two fake CPU devices (a fresh process): 3 programs padded to 4, split 2 + 2, same poses."""
+    code = f"""
+import dataclasses, numpy as np
+import mjx_arm, jax
+from mjx_arm import babble
+assert len(jax.devices()) == 2
+arm = mjx_arm.load(xml=open({str(tmp_path / "arm.xml")!r}).read())
+programs = babble.make_programs(babble.BabbleConfig(duration_s=1.0), np.arange(3))
+sharded = babble.ShardedRollout(arm)
+arr = sharded.shard(sharded.pad(programs))
+assert arr.shape[0] == 4 and [s.data.shape[0] for s in arr.addressable_shards] == [2, 2]
+poses = babble.simulate(arm, programs, backend="mjx", sharded=sharded)
+np.testing.assert_allclose(poses, babble.simulate(arm, programs, backend="c"), atol=2e-5)
+print("ok")
+"""
+    (tmp_path / "arm.xml").write_text(xml)
+    env = dict(os.environ, XLA_FLAGS="--xla_force_host_platform_device_count=2")
+    out = subprocess.run(
+        [sys.executable, "-c", code], env=env, capture_output=True, text=True, timeout=300
+    )
+    assert out.returncode == 0 and out.stdout.strip().endswith("ok"), out.stderr[-3000:]
