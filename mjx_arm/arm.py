@@ -218,7 +218,7 @@ class Arm:
         mujoco.mj_getState(m, data, state[0], spec)
         state[:] = state[0]
         pressure = np.full((n_batch, 3), self.valve.p_min_bar)
-        commands = np.asarray(valve.saturate(batched, self.valve))
+        commands = valve.saturate(batched, self.valve, xp=np)
         poses = np.zeros((n_batch, n_periods, POSE_DIM))
         ok = np.ones((n_batch, n_periods), dtype=bool)
         nthread = min(os.cpu_count() or 1, n_batch)
@@ -303,14 +303,8 @@ def _chunk_controls(pressure, commands, arm: Arm, nu: int) -> np.ndarray:
     p = np.asarray(pressure, dtype=np.float64)
     for k in range(periods):
         sub[:, k] = np.moveaxis(
-            np.asarray(
-                valve.substep_pressures(
-                    jnp.asarray(p),
-                    jnp.asarray(commands[:, k]),
-                    arm.n_substeps,
-                    arm.timestep_s,
-                    arm.valve,
-                )
+            valve.substep_pressures(
+                p, commands[:, k], arm.n_substeps, arm.timestep_s, arm.valve, xp=np
             ),
             0,
             1,

@@ -53,7 +53,7 @@ class ArmParams:
     """Rigid segments in the chain [choice: measured trade-off, see bench/ and README]."""
     timestep_s: float = 0.002
     """Physics timestep (s) [choice: largest stable step for both domains, see calibrate]."""
-    viscosity_pa_s: float = 90.0
+    viscosity_pa_s: float = 89.4
     """Fluid viscosity of the source domain's medium (Pa s) [calib: step response]."""
     bend_armature_scale: float = 4.0
     """Joint armature of each ball joint, as a multiple of the segment's own rotational inertia

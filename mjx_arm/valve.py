@@ -24,13 +24,13 @@ class ValveParams(NamedTuple):
     p_max_bar: float = constants.P_MAX_BAR
 
 
-def saturate(command_bar: jnp.ndarray, valve: ValveParams = ValveParams()) -> jnp.ndarray:
+def saturate(command_bar: jnp.ndarray, valve: ValveParams = ValveParams(), xp=jnp) -> jnp.ndarray:
     """Clips commands to what the valve can deliver.
 
     Commands outside [0, p_max] saturate at the range's ends, and a chamber never vents below
     p_min, so commands under p_min act as p_min.
     """
-    return jnp.clip(command_bar, valve.p_min_bar, valve.p_max_bar)
+    return xp.clip(command_bar, valve.p_min_bar, valve.p_max_bar)
 
 
 def substep_pressures(
@@ -39,6 +39,7 @@ def substep_pressures(
     n_substeps: int,
     timestep_s: float,
     valve: ValveParams = ValveParams(),
+    xp=jnp,
 ) -> jnp.ndarray:
     """Chamber pressures over one control period.
 
@@ -47,13 +48,14 @@ def substep_pressures(
       command_bar: [..., 3] saturated commands held over the period (bar).
       n_substeps: physics steps per control period.
       timestep_s: physics timestep (s).
+      xp: the array module, `jax.numpy` (default, traceable) or `numpy` (for MuJoCo C inputs).
 
     Returns:
       [n_substeps, ..., 3] pressure applied during each substep (bar); the last entry is the
       pressure at the end of the period.
     """
-    tau = jnp.where(command_bar >= pressure_bar, valve.tau_rise_s, valve.tau_drop_s)
-    elapsed = timestep_s * jnp.arange(1, n_substeps + 1, dtype=pressure_bar.dtype)
+    tau = xp.where(command_bar >= pressure_bar, valve.tau_rise_s, valve.tau_drop_s)
+    elapsed = timestep_s * xp.arange(1, n_substeps + 1, dtype=pressure_bar.dtype)
     elapsed = elapsed.reshape((n_substeps,) + (1,) * pressure_bar.ndim)
-    decay = jnp.exp(-elapsed / tau)
+    decay = xp.exp(-elapsed / tau)
     return command_bar + (pressure_bar - command_bar) * decay
