@@ -11,8 +11,24 @@ trajectories x 60 s x both domains, compilation included) with MJX and with MuJo
 
 Writes ``babble.md`` and ``babble.json`` to `--out`.
 
-    python bench/babble.py --quick --out results/bench_babble_cpu           # CPU smoke run
+    python bench/babble.py --quick --paper --out results/bench_babble_cpu   # CPU smoke run
     python bench/babble.py --paper --cache-dir /tmp/jax_cache --out results/bench_babble_gpu
+
+On the GPU machines (Python 3.12, jax with CUDA, no mujoco, no network), download the wheels here
+first and carry ``.whl/`` along (it is git-ignored)::
+
+    python -m pip download --no-deps --only-binary=:all: --python-version 3.12 --implementation cp \
+      --platform manylinux_2_28_x86_64 --platform manylinux_2_27_x86_64 \
+      --platform manylinux_2_17_x86_64 --platform any -d .whl mujoco==3.17.0 mujoco-mjx==3.17.0 \
+      glfw pyopengl trimesh etils absl-py websockets tqdm
+    # there:
+    python3 -m pip install -q --no-index --no-deps --target /tmp/site .whl/*.whl \
+      && export PYTHONPATH=/tmp/site:$PWD \
+      && python3 bench/babble.py --paper --cache-dir /tmp/jax_cache --out $OUT/bench_babble
+
+Each compilation (one per batch size and device set, one for the paper preset) can take a minute
+on a GPU; `--cache-dir` keeps them for the next run, and results are written after every row.
+`--sizes ""` with `--paper` times only the paper preset.
 """
 
 # ruff: noqa: I001  (mjx_arm is imported before jax: it sets an XLA CPU flag)
