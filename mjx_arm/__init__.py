@@ -1,12 +1,24 @@
 """The soft pneumatic arm in MuJoCo and MJX."""
 
 import os as _os
+from importlib import metadata as _metadata
 
-# MJX on a deep kinematic chain is exponentially slow on XLA's CPU fusion emitters. The flag must be
-# in place before JAX creates its CPU backend, so it is set here, at import, appended to any flags.
-_FLAG = "--xla_cpu_use_fusion_emitters=false"
-if _FLAG not in _os.environ.get("XLA_FLAGS", ""):
-    _os.environ["XLA_FLAGS"] = (_os.environ.get("XLA_FLAGS", "") + " " + _FLAG).strip()
+
+def _jaxlib_version() -> tuple[int, ...]:
+    try:
+        return tuple(int(x) for x in _metadata.version("jaxlib").split(".")[:2])
+    except (_metadata.PackageNotFoundError, ValueError):
+        return (0, 0)
+
+
+# MJX on a deep kinematic chain is exponentially slow on XLA's CPU fusion emitters (jaxlib 0.10).
+# The flag must be in place before JAX creates its CPU backend, so it is set here, at import,
+# appended to any flags. jaxlib 0.11 no longer knows the flag and aborts on it, so it is set only
+# for older jaxlib.
+CPU_FUSION_FLAG = "--xla_cpu_use_fusion_emitters=false"
+CPU_FUSION_FLAG_NEEDED = _jaxlib_version() < (0, 11)
+if CPU_FUSION_FLAG_NEEDED and CPU_FUSION_FLAG not in _os.environ.get("XLA_FLAGS", ""):
+    _os.environ["XLA_FLAGS"] = (_os.environ.get("XLA_FLAGS", "") + " " + CPU_FUSION_FLAG).strip()
 
 import contextlib as _contextlib  # noqa: E402
 import io as _io  # noqa: E402
