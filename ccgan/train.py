@@ -387,7 +387,10 @@ def _read_csv(path: Path) -> list[dict]:
     if not path.exists():
         return []
     with open(path, newline="") as f:
-        return list(csv.DictReader(f))
+        rows = list(csv.DictReader(f))
+    return [
+        {k: int(v) if k in ("seed", "epoch") else float(v) for k, v in row.items()} for row in rows
+    ]
 
 
 def train_and_evaluate(
@@ -422,12 +425,14 @@ def train_and_evaluate(
 
     workdir = Path(workdir)
     workdir.mkdir(parents=True, exist_ok=True)
+    ckpt_path, csv_path = workdir / "state.ckpt", workdir / "metrics.csv"
+    meta = {"config": config.to_dict(), "data": data_fingerprint(data), "seeds": list(seeds)}
+    if resume and ckpt_path.exists():
+        checkpoint.load(ckpt_path, expect=meta)  # fail fast, before compiling anything
     trainer = make_trainer(config, data, forward_c_params, forward_model)
     keys = jax.vmap(jax.random.PRNGKey)(jnp.asarray(seeds))
     init_keys, run_keys = jnp.swapaxes(jax.vmap(jax.random.split)(keys), 0, 1)
     state = jax.jit(jax.vmap(trainer.init))(init_keys)
-    meta = {"config": config.to_dict(), "data": data_fingerprint(data), "seeds": list(seeds)}
-    ckpt_path, csv_path = workdir / "state.ckpt", workdir / "metrics.csv"
     rows: list[dict] = []
     if resume and ckpt_path.exists():
         state, _ = checkpoint.load(ckpt_path, target=state, expect=meta)

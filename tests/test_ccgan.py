@@ -1,0 +1,305 @@
+"""Tests of the CCGAN-GP package: data, networks, losses, checkpoints, training and resumption.
+
+Tiny configurations on CPU. The end-to-end tests share one simulated data set (a 3-segment arm)
+and one XLA compilation cache, so the three driver runs of the resume test compile once.
+"""
+
+import dataclasses
+import math
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import ccgan
+import mjx_arm  # noqa: F401  (sets the XLA CPU flag before JAX creates its backend)
+from ccgan import checkpoint, losses, models
+from ccgan import data as data_lib
+from ccgan import forward as forward_lib
+from ccgan import train as train_lib
+
+# ----------------------------------------------------------------------------- data
+
+
+def test_normalisation_round_trip_and_range():
+    rng = np.random.default_rng(0)
+    poses = rng.normal(size=(3, 7, 6))
+    bounds = data_lib.pose_bounds(poses, poses + 1.0)
+    x = data_lib.normalise_pose(poses, bounds)
+    assert x.min() >= 0.0 and x.max() <= 1.0
+    np.testing.assert_allclose(data_lib.denormalise_pose(x, bounds), poses, atol=1e-12)
+    # 3.5 bar is the top of the valve range -> 1.0; 1.75 bar -> 0.5.
+    np.testing.assert_allclose(data_lib.normalise_pressure(np.array([3.5, 1.75])), [1.0, 0.5])
+
+
+def test_windows_and_holdout_unpaired():
+    rng = np.random.default_rng(0)
+    ps, xs = rng.uniform(0, 3.5, (5, 12, 3)), rng.normal(size=(5, 12, 6))
+    pc, xc = rng.uniform(0, 3.5, (4, 9, 3)), rng.normal(size=(4, 9, 6))  # other N and T
+    d = data_lib.prepare(ps, xs, pc, xc, window_length=4, n_val=1)
+    # D_s: 4 training trajectories x floor(12 / 4) windows; D_c: 3 x floor(9 / 4).
+    assert d.source.train.shape == (12, 4, 9)
+    assert d.constrained.train.shape == (6, 4, 9)
+    assert d.source.val.shape == (1, 12, 9) and d.constrained.val.shape == (1, 9, 9)
+    # The held-out trajectory is the last one, untouched by windowing.
+    np.testing.assert_allclose(d.source.val[0, :, :3], ps[-1] / 3.5, rtol=1e-6)
+    # Window 1 of trajectory 0 is steps 4..7; its previous poses are steps 3..6.
+    np.testing.assert_allclose(d.source.train_prev_pose[1, 1:], d.source.train[1, :-1, 3:])
+    np.testing.assert_allclose(d.source.train_prev_pose[1, 0], d.source.train[0, -1, 3:])
+    with pytest.raises(ValueError):
+        data_lib.prepare(ps, xs[:, :5], pc, xc, window_length=4, n_val=1)
+
+
+# ----------------------------------------------------------------------------- networks
+
+
+@pytest.mark.parametrize("t", [1, 6])
+def test_network_shapes_no_nan(t):
+    key = jax.random.PRNGKey(0)
+    x = jax.random.uniform(key, (2, t, 9))
+    fwd = models.ForwardModel()
+    fp = fwd.init(key, x[..., 3:], x[..., :3])
+    y = fwd.apply(fp, x[..., 3:], x[..., :3])
+    assert y.shape == (2, t, 6) and jnp.isfinite(y).all()
+    gen = models.Generator()
+    g = gen.apply(gen.init(key, x), x)
+    assert g.shape == (2, t, 9) and jnp.isfinite(g).all()
+    assert (g[..., :3] >= 0).all() and (g[..., :3] <= 1).all()  # squashed pressures
+    critic = models.Critic()
+    c = critic.apply(critic.init(key, x), x)
+    assert c.shape == (2,) and jnp.isfinite(c).all()
+
+
+def test_stretched_forward_matches_held_open_loop():
+    key = jax.random.PRNGKey(1)
+    fwd = models.ForwardModel(hidden=8, fc=5)
+    p = jax.random.uniform(key, (2, 4, 3))
+    pose0 = jax.random.uniform(jax.random.PRNGKey(2), (2, 6))
+    fp = fwd.init(key, pose0[:, None], p[:, :1])
+    open_loop = models.forward_open_loop(fwd, fp, p, pose0)
+    # k = 1 is a plain open-loop rollout, whatever k_max is.
+    np.testing.assert_allclose(
+        models.forward_stretched(fwd, fp, p, pose0, 1, 3), open_loop, rtol=1e-5, atol=1e-6
+    )
+    # k = 2: each command held twice; the pose after every second period is kept.
+    held = models.forward_open_loop(fwd, fp, jnp.repeat(p, 2, axis=1), pose0)[:, 1::2]
+    np.testing.assert_allclose(
+        models.forward_stretched(fwd, fp, p, pose0, jnp.int32(2), 3), held, rtol=1e-5, atol=1e-6
+    )
+
+
+# ----------------------------------------------------------------------------- losses
+
+
+def test_wasserstein_and_adversarial_losses():
+    real, fake = jnp.array([1.0, 3.0]), jnp.array([0.0, 2.0])
+    # E[fake] - E[real] = 1 - 2 = -1.
+    assert losses.critic_loss(real, fake) == pytest.approx(-1.0)
+    # -E[fake] = -(0 + 2) / 2 = -1.
+    assert losses.generator_adversarial_loss(fake) == pytest.approx(-1.0)
+
+
+def test_gradient_penalty_by_hand():
+    key = jax.random.PRNGKey(0)
+    real = jnp.zeros((2, 1, 2))
+    fake = jnp.ones((2, 1, 2))
+    # Linear critic C(x) = 2 * x[..., 0]: gradient (2, 0) everywhere, norm 2, (2 - 1)^2 = 1.
+    linear = lambda x: 2.0 * x[:, 0, 0]  # noqa: E731
+    assert losses.gradient_penalty(linear, real, fake, key) == pytest.approx(1.0, rel=1e-5)
+    # C(x) = 0.5 * |x|^2 has gradient x. With real = fake = (3, 4) every interpolate is (3, 4):
+    # norm 5, (5 - 1)^2 = 16.
+    quad = lambda x: 0.5 * jnp.sum(x**2, axis=(1, 2))  # noqa: E731
+    x = jnp.tile(jnp.array([3.0, 4.0]), (2, 1, 1))
+    assert losses.gradient_penalty(quad, x, x, key) == pytest.approx(16.0, rel=1e-5)
+    # A 1-Lipschitz critic with unit gradient (C = x0) pays nothing.
+    unit = lambda x: x[:, 0, 0]  # noqa: E731
+    assert losses.gradient_penalty(unit, real, fake, key) == pytest.approx(0.0, abs=1e-5)
+
+
+def test_cycle_identity_feedback_and_errors_by_hand():
+    a = jnp.array([[[1.0, -3.0]]])
+    zero = jnp.zeros_like(a)
+    # L1: (|1| + |-3|) / 2 = 2.
+    assert losses.cycle_loss(a, zero) == pytest.approx(2.0)
+    assert losses.identity_loss(zero, a) == pytest.approx(2.0)
+    # MSE: (1 + 9) / 2 = 5.
+    assert losses.feedback_loss(a, zero) == pytest.approx(5.0)
+    pred = jnp.array([0.03, 0.04, 0.0, 1.0, 0.0, 0.0])
+    target = jnp.array([0.0, 0.0, 0.0, 0.0, 2.0, 0.0])  # d3 need not be unit for the cosine
+    # ||(3, 4, 0) cm|| = 5 cm; d3 at right angles: pi / 2.
+    assert losses.position_error_cm(pred, target) == pytest.approx(5.0, rel=1e-5)
+    assert losses.orientation_error_rad(pred, target) == pytest.approx(math.pi / 2, rel=1e-5)
+
+
+def test_one_adamw_step_lowers_forward_loss():
+    key = jax.random.PRNGKey(0)
+    fwd = models.ForwardModel(hidden=8, fc=8)
+    x = jax.random.uniform(key, (4, 5, 9))
+    params = fwd.init(key, x[..., 3:], x[..., :3])
+    target = jnp.full((4, 5, 6), 0.5)
+
+    def loss_fn(p):
+        return jnp.mean((fwd.apply(p, x[..., 3:], x[..., :3]) - target) ** 2)
+
+    import optax
+
+    tx = optax.adamw(1e-2, weight_decay=1e-4)
+    before, grads = jax.value_and_grad(loss_fn)(params)
+    updates, _ = tx.update(grads, tx.init(params), params)
+    assert loss_fn(optax.apply_updates(params, updates)) < before
+
+
+# ----------------------------------------------------------------------------- checkpoints
+
+
+def test_checkpoint_round_trip_and_refusals(tmp_path):
+    tree = {"a": np.arange(4.0), "b": {"c": np.ones((2, 2), np.float32)}}
+    path = checkpoint.save(tmp_path / "x.ckpt", tree, {"config": {"lr": 1.0}})
+    restored, meta = checkpoint.load(path, target=tree, expect={"config": {"lr": 1.0}})
+    np.testing.assert_array_equal(restored["b"]["c"], tree["b"]["c"])
+    assert meta["config"] == {"lr": 1.0}
+    assert not list(tmp_path.glob("*.tmp"))  # the temporary file was renamed away
+
+    with pytest.raises(checkpoint.CheckpointError, match="does not match this run"):
+        checkpoint.load(path, target=tree, expect={"config": {"lr": 2.0}})
+    with pytest.raises(checkpoint.CheckpointError, match="fit|shapes"):
+        checkpoint.load(path, target={"a": np.arange(5.0), "b": {"c": np.ones((2, 2))}})
+
+    blob = bytearray(path.read_bytes())
+    blob[-5] ^= 0xFF  # flip a payload byte
+    bad = tmp_path / "bad.ckpt"
+    bad.write_bytes(bytes(blob))
+    with pytest.raises(checkpoint.CheckpointError, match="corrupt"):
+        checkpoint.load(bad, target=tree)
+    bad.write_bytes(path.read_bytes()[: len(blob) // 2])  # truncated, as by a crash mid-write
+    with pytest.raises(checkpoint.CheckpointError):
+        checkpoint.load(bad, target=tree)
+    with pytest.raises(checkpoint.CheckpointError, match="no checkpoint"):
+        checkpoint.load(tmp_path / "missing.ckpt")
+
+
+# ----------------------------------------------------------------------------- training
+
+
+TINY = train_lib.TrainConfig(
+    epochs=4,
+    batch_size=4,
+    window_length=5,
+    n_val=1,
+    stretch_choices=(1, 2),
+    stretch_every=2,
+    checkpoint_every=2,
+    gen_hidden=8,
+    gen_fc=16,
+    critic_features=(8, 8, 8, 8, 8),
+)
+
+
+@pytest.fixture(scope="module")
+def compile_cache(tmp_path_factory):
+    """A persistent XLA cache for this module, so identical driver runs compile once."""
+    old = {
+        n: getattr(jax.config, n)
+        for n in (
+            "jax_compilation_cache_dir",
+            "jax_persistent_cache_min_compile_time_secs",
+            "jax_persistent_cache_min_entry_size_bytes",
+        )
+    }
+    jax.config.update("jax_compilation_cache_dir", str(tmp_path_factory.mktemp("xla")))
+    jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.0)
+    jax.config.update("jax_persistent_cache_min_entry_size_bytes", 0)
+    yield
+    for n, v in old.items():
+        jax.config.update(n, v)
+
+
+@pytest.fixture(scope="module")
+def tiny_setup(compile_cache):
+    """Simulated babbling in both domains (3-segment arm), prepared data and a trained F_c."""
+    xml = mjx_arm.generate_xml(dataclasses.replace(mjx_arm.ArmParams(), n_segments=3))
+    rng = np.random.default_rng(0)
+    arrays = []
+    for domain, n in (("source", 5), ("constrained", 4)):  # unpaired: different counts
+        arm = mjx_arm.load(xml=xml, domain=domain)
+        p = data_lib.random_held_programs(rng, n, 30)
+        arrays += [p, data_lib.simulate(arm, p)]
+    data = data_lib.prepare(*arrays, window_length=TINY.window_length, n_val=TINY.n_val)
+    fconf = forward_lib.ForwardConfig(epochs=15, batch_size=6, hidden=16, fc=16)
+    fparams, hist, metrics = forward_lib.train_forward(fconf, data.constrained, data.bounds)
+    return data, fconf, fparams, hist, metrics
+
+
+def test_forward_model_learns(tiny_setup):
+    _, _, _, hist, metrics = tiny_setup
+    assert hist[-1] < hist[0]
+    assert all(np.isfinite(v) for v in metrics.values())
+    assert set(metrics) == {"one_step_cm", "one_step_rad", "open_loop_cm", "open_loop_rad"}
+
+
+def _params_equal(a, b):
+    la, lb = jax.tree.leaves(a), jax.tree.leaves(b)
+    return len(la) == len(lb) and all(np.array_equal(x, y) for x, y in zip(la, lb, strict=True))
+
+
+def test_end_to_end_and_resume_equals_uninterrupted(tiny_setup, tmp_path):
+    data, fconf, fparams, _, _ = tiny_setup
+    kw = dict(seeds=(0, 1), forward_model=fconf.model, progress=False)
+    full, rows = train_lib.train_and_evaluate(TINY, data, fparams, tmp_path / "full", **kw)
+
+    # End to end: every loss term logged and finite for both seeds, k from the choices.
+    assert len(rows) == 2 * TINY.epochs
+    for row in rows:
+        for m in train_lib.METRICS:
+            if m != "val_error_cm":
+                assert np.isfinite(float(row[m])), m
+        assert int(float(row["k"])) in TINY.stretch_choices
+    assert np.isfinite([float(r["val_error_cm"]) for r in rows if int(r["epoch"]) % 2 == 0]).all()
+    tr = ccgan.load_translator(tmp_path / "full" / "translator.ckpt")
+    ps = np.full((7, 3), 1.0)
+    xs = np.tile(data_lib.denormalise_pose(data.source.val[0, 0, 3:], data.bounds), (7, 1))
+    pc, k = tr.translate(ps, xs)
+    assert k in TINY.stretch_choices and pc.shape == (7 * k, 3)
+    assert np.isfinite(pc).all() and pc.min() >= 0.0 and pc.max() <= 3.5
+    assert tr.predict_poses(pc, xs[0]).shape == (7 * k, 6)
+
+    # Killed after the first checkpoint, then resumed: the same parameters, bit for bit.
+    half, _ = train_lib.train_and_evaluate(
+        TINY, data, fparams, tmp_path / "cut", max_chunks=1, **kw
+    )
+    assert int(half.epoch[0]) == 2 and not _params_equal(half.params, full.params)
+    resumed, rows2 = train_lib.train_and_evaluate(TINY, data, fparams, tmp_path / "cut", **kw)
+    assert _params_equal(resumed.params, full.params)
+    assert _params_equal(resumed.opt_gen, full.opt_gen)
+    assert [r["epoch"] for r in rows2] == [r["epoch"] for r in rows]
+
+    # A run with another config refuses the checkpoint.
+    other = dataclasses.replace(TINY, lambda_cycle=3.0)
+    with pytest.raises(checkpoint.CheckpointError, match="does not match"):
+        train_lib.train_and_evaluate(other, data, fparams, tmp_path / "cut", **kw)
+
+
+def test_corrupt_training_checkpoint_refused(tiny_setup, tmp_path):
+    data, fconf, fparams, _, _ = tiny_setup
+    workdir = tmp_path / "run"
+    workdir.mkdir()
+    (workdir / "state.ckpt").write_bytes(b"\x85garbage")
+    with pytest.raises(checkpoint.CheckpointError):
+        train_lib.train_and_evaluate(
+            TINY, data, fparams, workdir, forward_model=fconf.model, progress=False
+        )
+
+
+def test_baseline_and_vmapped_make_train(tiny_setup):
+    data, fconf, fparams, _, _ = tiny_setup
+    config = dataclasses.replace(TINY, baseline=True, epochs=2)
+    train = train_lib.make_train(config, data, fparams, fconf.model)
+    state, metrics = jax.jit(jax.vmap(train))(jax.random.split(jax.random.PRNGKey(0), 2))
+    assert set(state.params) == {"g_c", "c_c"}
+    assert metrics["generator_total"].shape == (2, 2)
+    assert np.isfinite(metrics["feedback"]).all() and np.isfinite(metrics["critic_c"]).all()
+    assert np.isnan(metrics["cycle"]).all()  # no cycle loss in the baseline
+    # Two seeds give two different generators.
+    g = state.params["g_c"]["params"]["out"]["kernel"]
+    assert not np.array_equal(g[0], g[1])
