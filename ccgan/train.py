@@ -33,7 +33,7 @@ from jax.sharding import Mesh, NamedSharding
 from jax.sharding import PartitionSpec as P
 
 from ccgan import checkpoint, losses
-from ccgan.data import PRESSURE_DIM, TranslationData
+from ccgan.data import PRESSURE_DIM, PoseBounds, TranslationData
 from ccgan.forward import ForwardConfig
 from ccgan.models import Critic, ForwardModel, Generator, forward_stretched
 
@@ -481,10 +481,21 @@ def train_and_evaluate(
     return state, rows
 
 
-def load_npz(path: str | os.PathLike) -> tuple[np.ndarray, np.ndarray]:
-    """(pressures [N, T, 3] bar, poses [N, T, 6]) from an .npz with keys "pressures", "poses"."""
-    with np.load(path) as f:
-        return np.asarray(f["pressures"]), np.asarray(f["poses"])
+def load_npz(*paths: str | os.PathLike):
+    """Concatenated (pressures [N, T, 3] bar, poses [N, T, 6], bounds or None) from .npz files.
+
+    Each file holds "pressures_bar" (or "pressures") and "poses", as `mjx_arm.babble` writes them;
+    list the validation file last (the last `n_val` trajectories are held out). When the files
+    carry "pose_low"/"pose_high" the first file's bounds are returned.
+    """
+    ps, xs, bounds = [], [], None
+    for path in paths:
+        with np.load(path) as f:
+            ps.append(np.asarray(f["pressures_bar"] if "pressures_bar" in f else f["pressures"]))
+            xs.append(np.asarray(f["poses"]))
+            if bounds is None and "pose_low" in f and "pose_high" in f:
+                bounds = PoseBounds(np.asarray(f["pose_low"]), np.asarray(f["pose_high"]))
+    return np.concatenate(ps), np.concatenate(xs), bounds
 
 
 def main(argv=None) -> None:
@@ -493,8 +504,12 @@ def main(argv=None) -> None:
     from ccgan import forward as forward_lib
 
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--source", required=True, help="D_s babbling .npz (pressures, poses)")
-    parser.add_argument("--constrained", required=True, help="D_c babbling .npz")
+    parser.add_argument(
+        "--source", nargs="+", required=True, help="D_s .npz files (train, then val)"
+    )
+    parser.add_argument(
+        "--constrained", nargs="+", required=True, help="D_c .npz files (train, then val)"
+    )
     parser.add_argument("--workdir", default="results/ccgan/run")
     parser.add_argument("--seeds", type=int, nargs="+", default=[0])
     parser.add_argument("--forward-epochs", type=int, default=ForwardConfig.epochs)
@@ -517,9 +532,11 @@ def main(argv=None) -> None:
             for f in dataclasses.fields(TrainConfig)
         }
     )
-    ps, xs = load_npz(args.source)
-    pc, xc = load_npz(args.constrained)
-    data = data_lib.prepare(ps, xs, pc, xc, config.window_length, config.n_val, config.stride)
+    ps, xs, bounds = load_npz(*args.source)
+    pc, xc, _ = load_npz(*args.constrained)
+    data = data_lib.prepare(
+        ps, xs, pc, xc, config.window_length, config.n_val, config.stride, bounds=bounds
+    )
     workdir = Path(args.workdir)
     fconf = forward_lib.ForwardConfig(epochs=args.forward_epochs)
     f_meta = {"config": dataclasses.asdict(fconf), "data": data_fingerprint(data)}
