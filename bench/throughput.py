@@ -4,15 +4,17 @@ Both backends run the same model, domain, timestep and pressure programs (`Arm.r
 jitted and vmapped over the batch, and the batch is sharded over all local devices; its compile
 time is measured separately. MuJoCo C runs `mujoco.rollout` with one thread per CPU core.
 
-    python bench/throughput.py --out bench/results            # on a GPU machine
-    python bench/throughput.py --quick                        # CPU smoke run
+    python -m bench.throughput --out bench/results            # on a GPU machine
+    python -m bench.throughput --quick                        # CPU smoke run
+    python -m bench.throughput --set timestep_s=0.002 ...     # a variant of ArmParams
 
-Writes throughput.md and throughput.json to --out.
+Writes throughput.md and throughput.json to --out (with the overrides in the name).
 """
 
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import os
 import platform
@@ -83,6 +85,14 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--c-batch", type=int, default=None, help="C batch (default 16/core)")
     parser.add_argument("--seconds", type=float, default=10.0, help="simulated s per rollout")
     parser.add_argument("--quick", action="store_true", help="tiny CPU smoke run")
+    parser.add_argument(
+        "--set",
+        action="append",
+        default=[],
+        metavar="FIELD=VALUE",
+        help="generate the model from ArmParams with this field changed (repeatable)",
+    )
+    parser.add_argument("--label", default="committed model", help="name of the model variant")
     parser.add_argument("--out", type=Path, default=Path("bench/results"))
     args = parser.parse_args(argv)
     if args.quick:
@@ -100,8 +110,16 @@ def main(argv: list[str] | None = None) -> None:
         "jax": jax.__version__,
     }
     rows = []
+    overrides = {}
+    for item in args.set:
+        field, value = item.split("=", 1)
+        default = getattr(mjx_arm.ArmParams(), field)
+        overrides[field] = (
+            value.lower() in ("1", "true") if isinstance(default, bool) else type(default)(value)
+        )
+    xml = mjx_arm.generate_xml(dataclasses.replace(mjx_arm.ArmParams(), **overrides))
     for domain in args.domains:
-        arm = mjx_arm.load(domain=domain)
+        arm = mjx_arm.load(xml=xml, domain=domain)
         steps = periods * arm.n_substeps
         c = time_c(arm, c_batch, periods)
         c_sim_rate = c["batch"] * args.seconds / c["wall_s"]
@@ -110,6 +128,8 @@ def main(argv: list[str] | None = None) -> None:
             sim_rate = r["batch"] * args.seconds / r["wall_s"]
             rows.append(
                 {
+                    "model": args.label,
+                    "overrides": overrides,
                     "domain": domain,
                     "segments": arm.mj_model.nbody - 1,
                     "timestep_s": arm.timestep_s,
@@ -128,7 +148,8 @@ def main(argv: list[str] | None = None) -> None:
             print(rows[-1], flush=True)
 
     args.out.mkdir(parents=True, exist_ok=True)
-    (args.out / "throughput.json").write_text(
+    tag = "" if not overrides else "_" + "_".join(f"{k}-{v}" for k, v in overrides.items())
+    (args.out / f"throughput{tag}.json").write_text(
         json.dumps({"machine": machine, "rows": rows}, indent=1)
     )
     header = "| domain | batch | MJX compile s | MJX sim s/s | MJX steps/s | C sim s/s | MJX / C |"
@@ -138,8 +159,11 @@ def main(argv: list[str] | None = None) -> None:
         f"Machine: {machine['accelerator']} ({machine['backend']}), CPU {machine['cpu']} x"
         f" {cores} cores, jax {machine['jax']}. Model: models/softarm.xml, "
         f"{args.seconds:g} simulated s per rollout, physics steps at the model's timestep.",
+        f"Model variant: {args.label} {overrides or ''}",
         f"MuJoCo C: `mujoco.rollout`, {cores} threads, batch {c_batch}.",
-        "Command: `python bench/throughput.py`",
+        "Command: `python -m bench.throughput "
+        + " ".join(argv or __import__("sys").argv[1:])
+        + "`",
         "",
         header,
         "|---|---|---|---|---|---|---|",
@@ -149,7 +173,7 @@ def main(argv: list[str] | None = None) -> None:
             f"| {r['domain']} | {r['batch']} | {r['mjx_compile_s']} | {r['mjx_sim_s_per_s']:.0f} |"
             f" {r['mjx_steps_per_s']:.3g} | {r['c_sim_s_per_s']:.0f} | {r['mjx_over_c']} |"
         )
-    (args.out / "throughput.md").write_text("\n".join(lines) + "\n")
+    (args.out / f"throughput{tag}.md").write_text("\n".join(lines) + "\n")
     print("\n".join(lines))
 
 

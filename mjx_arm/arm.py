@@ -7,6 +7,7 @@ backends start from the same rest state and apply identical per-substep pressure
 
 from __future__ import annotations
 
+import copy
 import dataclasses
 import functools
 import hashlib
@@ -138,7 +139,10 @@ class Arm:
 
     @functools.cached_property
     def mjx_model(self) -> mjx.Model:
-        return mjx.put_model(self.mj_model)
+        """The device model. Sensors are off: MJX rollouts read the tip site directly."""
+        m = copy.copy(self.mj_model)
+        m.opt.disableflags |= mujoco.mjtDisableBit.mjDSBL_SENSOR
+        return mjx.put_model(m)
 
     @property
     def timestep_s(self) -> float:

@@ -14,6 +14,8 @@ import numpy as np
 
 #: Explicit (Euler) fluid drag is stable while timestep * drag rate stays below 2; keep a margin.
 DRAG_STEP_MARGIN = 0.5
+#: Explicit joint springs are stable while timestep * natural frequency stays below 2.
+SPRING_STEP_MARGIN = 1.0
 
 
 @dataclasses.dataclass(frozen=True)
@@ -39,7 +41,8 @@ class Domain:
     """Numerical mass scaling (not physical): multiplies masses, inertias and armature and divides
     gravity by the same factor, so gravity loads, statics and the overdamped response stay put
     while explicit fluid drag becomes stable at the model's timestep. None picks the smallest
-    factor with timestep * drag rate <= DRAG_STEP_MARGIN. Use 1.0 to switch it off."""
+    factor with timestep * drag rate <= DRAG_STEP_MARGIN and timestep * the stiffest joint's
+    natural frequency <= SPRING_STEP_MARGIN. Use 1.0 to switch it off."""
 
     def __post_init__(self):
         for field in dataclasses.fields(self):
@@ -87,6 +90,23 @@ def drag_rate_per_s(mj_model: mujoco.MjModel) -> float:
     return max(rates)
 
 
+def spring_frequency_rad_per_s(mj_model: mujoco.MjModel) -> float:
+    """Largest sqrt(stiffness / joint-space inertia) over the joints, at the reference pose."""
+    data = mujoco.MjData(mj_model)
+    mujoco.mj_forward(mj_model, data)
+    inertia = np.zeros((mj_model.nv, mj_model.nv))
+    mujoco.mj_fullM(mj_model, data, inertia)
+    diagonal = np.diag(inertia)
+    frequencies = [0.0]
+    for joint in range(mj_model.njnt):
+        dof = mj_model.jnt_dofadr[joint]
+        width = {0: 6, 1: 3, 2: 1, 3: 1}[int(mj_model.jnt_type[joint])]
+        smallest = diagonal[dof : dof + width].min()
+        if mj_model.jnt_stiffness[joint] > 0 and smallest > 0:
+            frequencies.append(math.sqrt(mj_model.jnt_stiffness[joint] / smallest))
+    return max(frequencies)
+
+
 def apply(mj_model: mujoco.MjModel, domain: Domain) -> float:
     """Edits `mj_model` in place to put it in `domain`.
 
@@ -105,7 +125,9 @@ def apply(mj_model: mujoco.MjModel, domain: Domain) -> float:
 
     scale = domain.inertia_scale
     if scale is None:
-        scale = max(1.0, m.opt.timestep * drag_rate_per_s(m) / DRAG_STEP_MARGIN)
+        drag = m.opt.timestep * drag_rate_per_s(m) / DRAG_STEP_MARGIN
+        spring = (m.opt.timestep * spring_frequency_rad_per_s(m) / SPRING_STEP_MARGIN) ** 2
+        scale = max(1.0, drag, spring)
     if scale != 1.0:
         m.body_mass[:] *= scale
         m.body_inertia[:] *= scale

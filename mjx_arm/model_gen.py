@@ -51,9 +51,10 @@ class ArmParams:
     """Gravity (m/s^2), the arm hangs along -z [code]."""
     n_segments: int = 10
     """Rigid segments in the chain [choice: measured trade-off, see bench/ and README]."""
-    timestep_s: float = 0.002
-    """Physics timestep (s) [choice: largest stable step for both domains, see calibrate]."""
-    viscosity_pa_s: float = 89.4
+    timestep_s: float = 0.004
+    """Physics timestep (s) [choice: bench/timestep.py measures speed and error against 0.5 ms;
+    stability at this step comes from `Domain.inertia_scale`]."""
+    viscosity_pa_s: float = 106.5
     """Fluid viscosity of the source domain's medium (Pa s) [calib: step response]."""
     bend_armature_scale: float = 4.0
     """Joint armature of each ball joint, as a multiple of the segment's own rotational inertia
@@ -61,9 +62,10 @@ class ArmParams:
     `timestep_s`; the overdamped bending response is set by stiffness and drag, not inertia]."""
     stretch_armature_scale: float = 4.0
     """Slide-joint armature as a multiple of the segment mass [choice: as above, axial mode]."""
-    stretch_damping_ratio: float = 1.0
-    """Damping ratio of each slide joint's own axial mode [choice: the rod's internal losses; only
-    damps the fast axial oscillation, which the paper's model does not resolve at 10 Hz]."""
+    euler_implicit_damping: bool = False
+    """Keep MuJoCo's implicit joint-damping pass in the Euler step [choice: the joints carry no
+    damping (the medium does all of it), so the pass, an extra factorisation of the mass matrix
+    every step, is switched off with `<flag eulerdamp="disable"/>`]."""
 
     @property
     def segment_length_m(self) -> float:
@@ -121,15 +123,6 @@ class ArmParams:
     @property
     def stretch_armature_kg(self) -> float:
         return self.stretch_armature_scale * self.segment_mass_kg
-
-    @property
-    def stretch_damping_ns_per_m(self) -> float:
-        moving_mass = self.segment_mass_kg + self.stretch_armature_kg
-        return (
-            2.0
-            * self.stretch_damping_ratio
-            * math.sqrt(self.stretch_stiffness_n_per_m * moving_mass)
-        )
 
     def validate(self) -> None:
         """Raises ValueError for parameters that cannot make a model."""
@@ -196,11 +189,14 @@ def generate_xml(params: ArmParams = ArmParams()) -> str:
     gravity {_f(p.gravity_mps2)} m/s^2 [code].
   Per segment (l = {_f(seg)} m, m = {_f(p.segment_mass_kg)} kg, solid-cylinder inertia):
     ball-joint stiffness E*I/l = {_f(p.bend_stiffness_nm_per_rad)} N m/rad (I = pi r^4/4);
+      the base joint stands for the half segment at the clamp, so 2*E*I/l: this places each
+      joint's compliance at the centroid of the rod it lumps and makes the tip deflection under
+      a uniform moment exact for any segment count [choice];
       MuJoCo's ball spring is isotropic, so twist uses E*I/l, not G*J/l = \
 {_f(p.twist_stiffness_nm_per_rad)} [choice];
     slide-joint stiffness E*A/l = {_f(p.stretch_stiffness_n_per_m)} N/m (A = pi r^2);
-    armature: ball {_f(p.bend_armature_kgm2)} kg m^2, slide {_f(p.stretch_armature_kg)} kg,
-      slide damping {_f(p.stretch_damping_ns_per_m)} N s/m [choice, see ArmParams].
+    armature: ball {_f(p.bend_armature_kgm2)} kg m^2, slide {_f(p.stretch_armature_kg)} kg
+      [choice, see ArmParams]; no joint damping: the medium damps the arm.
   Chambers: 3 spatial tendons, {_f(p.chamber_offset_m)} m off the axis at 0/120/240 deg
     [paper, code], {_f(p.chamber_length_m)} m long [paper]; force = pressure x lumen area
     pi (r_out - wall)^2 = {_f(p.chamber_area_m2)} m^2 [code geometry], so gain
@@ -220,7 +216,8 @@ def generate_xml(params: ArmParams = ArmParams()) -> str:
         f'  <option timestep="{_f(p.timestep_s)}" integrator="Euler" jacobian="dense"'
         f' gravity="0 0 {_f(-p.gravity_mps2)}" viscosity="{_f(p.viscosity_pa_s)}" density="0">'
     )
-    lines.append('    <flag contact="disable"/>')
+    euler_damp = "" if p.euler_implicit_damping else ' eulerdamp="disable"'
+    lines.append(f'    <flag contact="disable"{euler_damp}/>')
     lines.append("  </option>")
     lines.append("  <custom>")
     for name, value in constants.CUSTOM_VALVE_FIELDS.items():
@@ -245,7 +242,7 @@ def generate_xml(params: ArmParams = ArmParams()) -> str:
     lines.append('      <default class="stretch">')
     lines.append(
         f'        <joint type="slide" axis="0 0 -1" stiffness="{_f(p.stretch_stiffness_n_per_m)}"'
-        f' damping="{_f(p.stretch_damping_ns_per_m)}" armature="{_f(p.stretch_armature_kg)}"/>'
+        f' armature="{_f(p.stretch_armature_kg)}"/>'
     )
     lines.append("      </default>")
     lines.append("    </default>")
@@ -270,7 +267,11 @@ def generate_xml(params: ArmParams = ArmParams()) -> str:
         pos = "0 0 0" if i == 0 else f"0 0 {_f(-seg)}"
         lines.append(f'{indent}<body name="seg_{i}" pos="{pos}" childclass="segment">')
         inner = indent + "  "
-        lines.append(f'{inner}<joint name="bend_{i}" class="bend"/>')
+        if i == 0:
+            base_stiffness = _f(2.0 * p.bend_stiffness_nm_per_rad)
+            lines.append(f'{inner}<joint name="bend_0" class="bend" stiffness="{base_stiffness}"/>')
+        else:
+            lines.append(f'{inner}<joint name="bend_{i}" class="bend"/>')
         lines.append(f'{inner}<joint name="stretch_{i}" class="stretch"/>')
         lines.append(
             f'{inner}<inertial pos="0 0 {_f(-seg / 2)}" mass="{_f(p.segment_mass_kg)}"'
