@@ -54,8 +54,11 @@ class ArmParams:
     timestep_s: float = 0.004
     """Physics timestep (s) [choice: bench/timestep.py measures speed and error against 0.5 ms;
     stability at this step comes from `Domain.inertia_scale`]."""
-    viscosity_pa_s: float = 106.5
-    """Fluid viscosity of the source domain's medium (Pa s) [calib: step response]."""
+    medium_drag_ns_per_m2: float = 2057.0
+    """Viscous drag of the source domain's medium on the arm, force per unit length per unit
+    speed (N s/m^2) [calib: `python -m mjx_arm.calibrate` fits the paper's 0.25 s mechanical
+    step response; for comparison, the paper code's 800 1/s on its 1104 kg/m^3 rod is
+    2497 N s/m^2]. The MJCF's viscosity is derived from it per segment count."""
     bend_armature_scale: float = 4.0
     """Joint armature of each ball joint, as a multiple of the segment's own rotational inertia
     about its top [choice: slows only the segment-local modes so explicit drag stays stable at
@@ -66,6 +69,24 @@ class ArmParams:
     """Keep MuJoCo's implicit joint-damping pass in the Euler step [choice: the joints carry no
     damping (the medium does all of it), so the pass, an extra factorisation of the mass matrix
     every step, is switched off with `<flag eulerdamp="disable"/>`]."""
+
+    @property
+    def drag_diameter_m(self) -> float:
+        """Mean side of a segment's inertia box, the diameter in MuJoCo's Stokes drag.
+
+        A solid cylinder's inertia box has sides sqrt(3) r, sqrt(3) r and l.
+        """
+        return (2.0 * math.sqrt(3.0) * self.radius_m + self.segment_length_m) / 3.0
+
+    @property
+    def viscosity_pa_s(self) -> float:
+        """MJCF viscosity giving each segment the drag 3 pi mu d = medium_drag * l.
+
+        MuJoCo's inertia-box drag on a body grows with its box's mean side, not its length, so a
+        fixed viscosity would damp a 20-segment arm almost twice as much as a 10-segment one.
+        """
+        drag_per_segment = self.medium_drag_ns_per_m2 * self.segment_length_m
+        return drag_per_segment / (3.0 * math.pi * self.drag_diameter_m)
 
     @property
     def segment_length_m(self) -> float:
@@ -135,7 +156,7 @@ class ArmParams:
             if isinstance(value, float) and not math.isfinite(value):
                 raise ValueError(f"{field.name} must be finite, got {value}")
         positive = ("length_m", "radius_m", "mass_kg", "youngs_modulus_pa", "timestep_s")
-        for name in positive + ("viscosity_pa_s",):
+        for name in positive + ("medium_drag_ns_per_m2",):
             if getattr(self, name) <= 0.0:
                 raise ValueError(f"{name} must be > 0 (a zero viscosity drops MJX's fluid code)")
 
@@ -205,7 +226,8 @@ def generate_xml(params: ArmParams = ArmParams()) -> str:
     drop {_f(constants.VALVE_TAU_DROP_S)} s, floor {_f(constants.P_MIN_BAR)} bar [paper, code].
     MuJoCo's filter dynamics has one time constant, so mjx_arm.valve applies the valve and
     these numbers travel in <custom>.
-  Medium: viscosity {_f(p.viscosity_pa_s)} Pa s for the source domain [calib]; the constrained
+  Medium: drag {_f(p.medium_drag_ns_per_m2)} N s/m^2 per length [calib], so viscosity
+    {_f(p.viscosity_pa_s)} Pa s on these segments, for the source domain; the constrained
     domain scales it by 10 [paper]. Integrator Euler (MJX has no implicitfast with fluid drag),
     timestep {_f(p.timestep_s)} s [choice], dense Jacobians, contacts off (the arm touches nothing).
 -->

@@ -33,8 +33,8 @@ def test_segment_counts_compile_with_chamber_ending_at_its_length(n_segments):
 
 
 def test_generator_rejects_bad_parameters():
-    with pytest.raises(ValueError, match="viscosity"):
-        generate_xml(dataclasses.replace(ArmParams(), viscosity_pa_s=0.0))
+    with pytest.raises(ValueError, match="medium_drag"):
+        generate_xml(dataclasses.replace(ArmParams(), medium_drag_ns_per_m2=0.0))
     with pytest.raises(ValueError, match="n_segments"):
         generate_xml(dataclasses.replace(ArmParams(), n_segments=1))
 
