@@ -72,40 +72,159 @@ def forward_open_loop(model: ForwardModel, params, pressure, pose0):
     return jnp.swapaxes(poses, 0, 1)
 
 
-def forward_stretched(model: ForwardModel, params, pressure, pose0, k, k_max: int):
-    """F's open-loop response when each command is held k control periods (time stretching).
+def _period(model: ForwardModel, params, carry, pressure):
+    """One control period of F: carry ((c, h), pose [B, 6]) and command [B, 3] -> next carry."""
+    lstm, pose = carry
+    lstm, out = model.apply(params, pose[:, None], pressure[:, None], lstm, return_carry=True)
+    return lstm, out[:, 0]
 
-    Every command is applied k times in a row and the pose after its k-th period is kept, so the
-    result lines up step by step with the D_s trajectory the commands came from. `k` may be a
-    traced integer in [1, k_max]; periods past k are masked (the state is carried through
-    unchanged), so one compiled function serves every k.
+
+def forward_stretched_masked(
+    model: ForwardModel, params, pressure, pose0, k, k_max: int, unroll: int = 1
+):
+    """Reference `forward_stretched`: k_max periods per command, those past k masked.
+
+    Every command costs k_max LSTM periods whatever k is; kept as the test oracle of
+    `forward_stretched` and for vmapping over several k at once (one fixed-length scan, e.g. the
+    choice of k, which runs forward only).
 
     Args:
-      model: the module.
-      params: its variables.
-      pressure: [B, T, 3] normalised commands.
-      pose0: [B, 6] normalised pose before the first command.
-      k: hold factor, int (traced or static), 1 <= k <= k_max.
-      k_max: static upper bound on k.
+      model, params, pressure, pose0, k, k_max: as `forward_stretched`.
+      unroll: periods per iteration of the inner scan (numerics unchanged).
 
     Returns:
       [B, T, 6] normalised poses after each command's k-th period.
     """
 
     def period(carry, j, p_t):
-        lstm, pose = carry
-        new_lstm, out = model.apply(params, pose[:, None], p_t[:, None], lstm, return_carry=True)
-        live = j < k
-        keep = lambda new, old: jnp.where(live, new, old)  # noqa: E731
-        return (jax.tree.map(keep, new_lstm, lstm), keep(out[:, 0], pose)), None
+        new = _period(model, params, carry, p_t)
+        keep = lambda new, old: jnp.where(j < k, new, old)  # noqa: E731
+        return jax.tree.map(keep, new, carry), None
 
     def command(carry, p_t):
-        carry, _ = jax.lax.scan(lambda c, j: period(c, j, p_t), carry, jnp.arange(k_max))
+        periods = jnp.arange(k_max)
+        carry, _ = jax.lax.scan(lambda c, j: period(c, j, p_t), carry, periods, unroll=unroll)
         return carry, carry[1]
 
     carry0 = (model.zero_carry(pressure.shape[0]), pose0)
     _, poses = jax.lax.scan(command, carry0, jnp.swapaxes(pressure, 0, 1))
     return jnp.swapaxes(poses, 0, 1)
+
+
+def forward_stretched(
+    model: ForwardModel, params, pressure, pose0, k, k_max: int, unroll: int = 10
+):
+    """F's open-loop response when each command is held k control periods (time stretching).
+
+    Every command is applied k times in a row and the pose after its k-th period is kept, so the
+    result lines up step by step with the D_s trajectory the commands came from. `k` may be a
+    traced integer in [1, k_max], so one compiled function serves every k; only the T * k live
+    periods run (a while loop of ceil(T * k / unroll) iterations, each `unroll` periods long),
+    forward and backward, instead of T * k_max. Under vmap over k the loop runs to the largest k.
+
+    Reverse-mode differentiable in `pressure` and `pose0` through a custom VJP that stores every
+    period's carry and walks them back (F's parameters are frozen: `stop_gradient`). Equal to
+    `forward_stretched_masked` up to float rounding.
+
+    Args:
+      model: the module.
+      params: its variables (treated as constants).
+      pressure: [B, T, 3] normalised commands.
+      pose0: [B, 6] normalised pose before the first command.
+      k: hold factor, int (traced or static), 1 <= k <= k_max.
+      k_max: static upper bound on k (sizes the stored carries).
+      unroll: periods per loop iteration (fewer, longer iterations; numerics unchanged).
+
+    Returns:
+      [B, T, 6] normalised poses after each command's k-th period.
+    """
+    fn = _make_stretched(model, k_max, unroll)
+    return fn(jax.lax.stop_gradient(params), pressure, pose0, jnp.asarray(k, jnp.int32))
+
+
+def _make_stretched(model: ForwardModel, k_max: int, unroll: int):
+    """The custom-VJP function (params, pressure [B, T, 3], pose0 [B, 6], k) -> poses [B, T, 6]."""
+
+    def period(params, carry, p):
+        return _period(model, params, carry, p)
+
+    def sizes(pressure, k):
+        t = pressure.shape[1]
+        n = t * k  # live periods
+        padded = -(-t * k_max // unroll) * unroll  # static buffer length, whole iterations
+        return t, n, (n + unroll - 1) // unroll, padded
+
+    def run(params, pressure, pose0, k):
+        """Forward loop; returns the poses and the carries [n_pad + 1, ...] (index i = before i)."""
+        t, n, n_iter, padded = sizes(pressure, k)
+        p_tm = jnp.swapaxes(pressure, 0, 1)
+        carry0 = (model.zero_carry(pressure.shape[0]), pose0)
+        buf = jax.tree.map(lambda x: jnp.zeros((padded + 1,) + x.shape, x.dtype), carry0)
+        buf = jax.tree.map(lambda b, x: b.at[0].set(x), buf, carry0)
+
+        def body(state):
+            j, carry, buf = state
+            outs = []
+            for u in range(unroll):
+                i = j * unroll + u
+                new = period(params, carry, p_tm[jnp.clip(i // k, 0, t - 1)])
+                carry = jax.tree.map(lambda a, b, i=i: jnp.where(i < n, a, b), new, carry)
+                outs.append(carry)
+            block = jax.tree.map(lambda *xs: jnp.stack(xs), *outs)
+            buf = jax.tree.map(
+                lambda b, x: jax.lax.dynamic_update_slice_in_dim(b, x, j * unroll + 1, 0),
+                buf,
+                block,
+            )
+            return j + 1, carry, buf
+
+        _, _, buf = jax.lax.while_loop(lambda s: s[0] < n_iter, body, (0, carry0, buf))
+        poses = buf[1][(jnp.arange(t) + 1) * k]  # after period (t + 1) k - 1
+        return jnp.swapaxes(poses, 0, 1), buf
+
+    @jax.custom_vjp
+    def stretched(params, pressure, pose0, k):
+        return run(params, pressure, pose0, k)[0]
+
+    def fwd(params, pressure, pose0, k):
+        poses, buf = run(params, pressure, pose0, k)
+        return poses, (params, pressure, k, buf)
+
+    def bwd(res, ct):
+        params, pressure, k, buf = res
+        t, n, n_iter, _ = sizes(pressure, k)
+        p_tm = jnp.swapaxes(pressure, 0, 1)
+        ct_tm = jnp.swapaxes(ct, 0, 1)
+        g0 = jax.tree.map(lambda b: jnp.zeros_like(b[0]), buf)
+
+        def body(state):
+            j, g, g_p = state
+            before = jax.tree.map(
+                lambda b: jax.lax.dynamic_slice_in_dim(b, j * unroll, unroll, 0), buf
+            )
+            for u in reversed(range(unroll)):
+                i = j * unroll + u
+                live = i < n
+                # The pose after period i is an output when i closes a command.
+                out_t = jnp.clip((i + 1) // k - 1, 0, t - 1)
+                is_out = live & ((i + 1) % k == 0)
+                g = (g[0], g[1] + jnp.where(is_out, ct_tm[out_t], 0.0))
+                cmd = jnp.clip(i // k, 0, t - 1)
+                c_in = jax.tree.map(lambda b, u=u: b[u], before)
+                _, vjp = jax.vjp(lambda c, p: period(params, c, p), c_in, p_tm[cmd])
+                g_c, g_cmd = vjp(g)
+                g = jax.tree.map(lambda a, b, live=live: jnp.where(live, a, b), g_c, g)
+                g_p = g_p.at[cmd].add(jnp.where(live, g_cmd, 0.0))
+            return j - 1, g, g_p
+
+        _, g, g_p = jax.lax.while_loop(
+            lambda s: s[0] >= 0, body, (n_iter - 1, g0, jnp.zeros_like(p_tm))
+        )
+        zeros = jax.tree.map(jnp.zeros_like, params)
+        return zeros, jnp.swapaxes(g_p, 0, 1), g[1], None
+
+    stretched.defvjp(fwd, bwd)
+    return stretched
 
 
 class Generator(nn.Module):
@@ -118,13 +237,16 @@ class Generator(nn.Module):
     hidden: int = 32
     fc: int = 128
     n_layers: int = 2
+    #: Time steps per iteration of the LSTM scans (numerics unchanged; the parameters do not
+    #: depend on it).
+    unroll: int = 1
 
     @nn.compact
     def __call__(self, x):
         """x: [B, T, 9] normalised samples -> [B, T, 9] (pressure in [0, 1], then pose)."""
         h = x
         for i in range(self.n_layers):
-            h = nn.RNN(nn.OptimizedLSTMCell(self.hidden), name=f"lstm_{i}")(h)
+            h = nn.RNN(nn.OptimizedLSTMCell(self.hidden), unroll=self.unroll, name=f"lstm_{i}")(h)
         h = nn.relu(nn.Dense(self.fc, name="fc")(h))
         out = nn.Dense(PRESSURE_DIM + POSE_DIM, name="out")(h)
         return jnp.concatenate([nn.sigmoid(out[..., :PRESSURE_DIM]), out[..., PRESSURE_DIM:]], -1)

@@ -35,7 +35,13 @@ from jax.sharding import PartitionSpec as P
 from ccgan import checkpoint, losses
 from ccgan.data import PRESSURE_DIM, PoseBounds, TranslationData
 from ccgan.forward import ForwardConfig
-from ccgan.models import Critic, ForwardModel, Generator, forward_stretched
+from ccgan.models import (
+    Critic,
+    ForwardModel,
+    Generator,
+    forward_stretched,
+    forward_stretched_masked,
+)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -73,6 +79,14 @@ class TrainConfig:
     stretch_choices: tuple[int, ...] = (5, 10, 15, 20, 25, 30)
     #: Epochs between choices of k (the paper's N; also chosen once before training).
     stretch_every: int = 10
+    #: Control steps per held-out window when choosing k (0 = whole trajectories). Each window
+    #: starts F_c from the recorded pose, so the windows run in parallel: the choice costs
+    #: val_window_length * k_max sequential F_c periods instead of T_val * k_max.
+    val_window_length: int = 100
+    #: LSTM time steps per loop iteration in the generators (numerics unchanged).
+    gen_unroll: int = 10
+    #: F_c periods per loop iteration in the feedback rollout and the choice of k.
+    feedback_unroll: int = 10
     #: WCGAN-GP baseline: one generator and one critic on D_c only, no cycle/identity loss.
     baseline: bool = False
     #: Epochs between checkpoints (also the driver's jitted chunk and tqdm tick).
@@ -175,7 +189,7 @@ def make_trainer(
       `Trainer`.
     """
     fwd = forward_model or ForwardModel()
-    gen = Generator(hidden=config.gen_hidden, fc=config.gen_fc)
+    gen = Generator(hidden=config.gen_hidden, fc=config.gen_fc, unroll=config.gen_unroll)
     critic = Critic(features=config.critic_features)
     tx_gen = _optimizer(config.lr_generator, config)
     tx_critic = _optimizer(config.lr_critic, config)
@@ -194,19 +208,35 @@ def make_trainer(
     if steps < 1:
         raise ValueError(f"too few windows ({n_in}, {n_c}) for batch size {batch}")
     val = jnp.asarray(data.source.val)
-    val_pose0 = jnp.asarray(data.source.val_prev_pose)[:, 0]
+    val_prev = jnp.asarray(data.source.val_prev_pose)
+    # Held-out windows for the choice of k: [n_val * W, L_val] (a trailing partial window is
+    # dropped), each started from its recorded previous pose.
+    t_val = val.shape[1]
+    l_val = min(config.val_window_length or t_val, t_val)
+    n_win = t_val // l_val
     low, high = jnp.asarray(data.bounds.low), jnp.asarray(data.bounds.high)
     choices = jnp.asarray(config.stretch_choices, jnp.int32)
 
+    def to_windows(x):
+        return x[:, : n_win * l_val].reshape(-1, l_val, x.shape[-1])
+
     def validation_errors(state: TrainState):
-        """Mean tip error (cm) on held-out D_s trajectories for each k in stretch_choices."""
-        commands = gen.apply(state.params["g_c"], val)[..., :PRESSURE_DIM]
+        """Mean tip error (cm) on held-out D_s windows for each k in stretch_choices.
+
+        G_c translates whole held-out trajectories (as the translator does); F_c then runs the
+        commands of every `val_window_length` window open loop from the window's recorded pose.
+        All k run at once: one masked scan of l_val * k_max periods, vmapped over the choices.
+        """
+        commands = to_windows(gen.apply(state.params["g_c"], val)[..., :PRESSURE_DIM])
+        target = to_windows(val[..., PRESSURE_DIM:])
+        pose0 = to_windows(val_prev)[:, 0]
 
         def for_k(k):
-            pred = forward_stretched(fwd, forward_c_params, commands, val_pose0, k, config.k_max)
+            pred = forward_stretched_masked(
+                fwd, forward_c_params, commands, pose0, k, config.k_max, config.feedback_unroll
+            )
             span = high - low
-            err = losses.position_error_cm(pred * span + low, val[..., PRESSURE_DIM:] * span + low)
-            return err.mean()
+            return losses.position_error_cm(pred * span + low, target * span + low).mean()
 
         return jax.vmap(for_k)(choices)
 
@@ -278,7 +308,13 @@ def make_trainer(
             fake_c = gen.apply(gparams["g_c"], xs)
         adv = losses.generator_adversarial_loss(critic.apply(cparams["c_c"], fake_c))
         pred = forward_stretched(
-            fwd, forward_c_params, fake_c[..., :PRESSURE_DIM], prev_s[:, 0], k, config.k_max
+            fwd,
+            forward_c_params,
+            fake_c[..., :PRESSURE_DIM],
+            prev_s[:, 0],
+            k,
+            config.k_max,
+            config.feedback_unroll,
         )
         out = {"feedback": losses.feedback_loss(pred, xs[..., PRESSURE_DIM:])}
         if cycle:

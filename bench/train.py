@@ -1,0 +1,210 @@
+"""Wall time of CCGAN-GP training: compile time and seconds per epoch, one seed and vmapped seeds.
+
+Synthetic data of the paper's shapes (pressures [N, T, 3] bar, smooth poses [N, T, 6]) and a
+randomly initialised F_c (64/50): the cost of a train step does not depend on the values. Each
+timing forces every seed's k to one value of `stretch_choices`; the k selection (every
+`stretch_every` epochs) is timed on its own and amortised into the per-epoch figure.
+
+    python -m bench.train --out bench/results                 # reduced config (CPU)
+    python -m bench.train --paper --out bench/results/h200    # paper scale, 550 epochs (GPU)
+
+Writes train.md and train.json (train_paper.* with --paper) to --out.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import platform
+import time
+from pathlib import Path
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from ccgan import data as data_lib
+from ccgan import train as train_lib
+from ccgan.models import ForwardModel
+
+#: The paper's training time for one CCGAN-GP (12 h 32 min).
+PAPER_WALL_S = 12 * 3600 + 32 * 60
+
+
+def cpu_model() -> str:
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                return line.split(":", 1)[1].strip()
+    except OSError:
+        pass
+    return platform.processor() or "unknown CPU"
+
+
+def synthetic_data(n_traj: int, samples: int, config: train_lib.TrainConfig, seed: int = 0):
+    """Both domains: n_traj trajectories x samples steps, random held pressures, smooth poses."""
+    rng = np.random.default_rng(seed)
+    arrays = []
+    for _ in range(2):
+        p = data_lib.random_held_programs(rng, n_traj, samples)
+        x = np.cumsum(rng.normal(scale=0.01, size=(n_traj, samples, 6)), axis=1)
+        arrays += [p, x.astype(np.float32)]
+    return data_lib.prepare(*arrays, config.window_length, config.n_val, config.stride)
+
+
+def _block(tree):
+    return jax.tree.map(lambda x: x.block_until_ready(), tree)
+
+
+def time_epochs(config, data, fc_params, fwd, n_seeds: int, k: int, epochs: int) -> dict:
+    """Compile time and seconds per epoch of `run_epochs` for n_seeds vmapped seeds at hold k."""
+    trainer = train_lib.make_trainer(config, data, fc_params, fwd)
+    keys = jax.random.split(jax.random.PRNGKey(0), n_seeds)
+    state = _block(jax.jit(jax.vmap(trainer.init))(keys))
+    state = state.replace(k=jnp.full_like(state.k, k))
+    run = jax.jit(jax.vmap(trainer.run_epochs, in_axes=(0, 0, None, None)), static_argnums=3)
+    # Epochs 0..epochs-1 with epochs < stretch_every never reach the k selection.
+    t0 = time.perf_counter()
+    compiled = run.lower(state, keys, jnp.int32(0), epochs).compile()
+    compile_s = time.perf_counter() - t0
+    _block(compiled(state, keys, jnp.int32(0)))  # warm-up
+    t0 = time.perf_counter()
+    out_state, _ = _block(compiled(state, keys, jnp.int32(0)))
+    epoch_s = (time.perf_counter() - t0) / epochs
+    assert np.all(np.asarray(out_state.k) == k), "k changed inside the timed epochs"
+
+    val = jax.jit(jax.vmap(trainer.validation_errors))
+    t0 = time.perf_counter()
+    val_compiled = val.lower(state).compile()
+    val_compile_s = time.perf_counter() - t0
+    _block(val_compiled(state))
+    reps = 3
+    t0 = time.perf_counter()
+    for _ in range(reps):
+        _block(val_compiled(state))
+    select_s = (time.perf_counter() - t0) / reps
+    return {
+        "seeds": n_seeds,
+        "k": k,
+        "compile_s": compile_s,
+        "epoch_s": epoch_s,
+        "select_compile_s": val_compile_s,
+        "select_s": select_s,
+        "epoch_with_select_s": epoch_s + select_s / config.stretch_every,
+    }
+
+
+def run_paper(config, data, fc_params, fwd, seeds: tuple[int, ...]) -> dict:
+    """The whole run, chunked like `train_and_evaluate` (no files): total wall time."""
+    trainer = train_lib.make_trainer(config, data, fc_params, fwd)
+    keys = jax.vmap(jax.random.PRNGKey)(jnp.asarray(seeds))
+    t_start = time.perf_counter()
+    state = _block(jax.jit(jax.vmap(trainer.init))(keys))
+    run = jax.jit(jax.vmap(trainer.run_epochs, in_axes=(0, 0, None, None)), static_argnums=3)
+    chunk = max(1, config.checkpoint_every)
+    compiled = run.lower(state, keys, jnp.int32(0), chunk).compile()
+    compile_s = time.perf_counter() - t_start
+    ks = []
+    for start in range(0, config.epochs, chunk):
+        n = min(chunk, config.epochs - start)
+        fn = compiled if n == chunk else run
+        args = (state, keys, jnp.int32(start)) if n == chunk else (state, keys, jnp.int32(start), n)
+        state, metrics = _block(fn(*args))
+        ks.append(np.asarray(metrics["k"])[:, -1].tolist())
+    total_s = time.perf_counter() - t_start
+    return {
+        "seeds": list(seeds),
+        "epochs": config.epochs,
+        "compile_s": compile_s,
+        "total_s": total_s,
+        "epoch_s": (total_s - compile_s) / config.epochs,
+        "k_per_chunk": ks,
+        "paper_s": PAPER_WALL_S,
+    }
+
+
+def _hms(s: float) -> str:
+    s = int(round(s))
+    return f"{s // 3600} h {s % 3600 // 60:02d} min {s % 60:02d} s"
+
+
+def main(argv=None) -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--out", default="bench/results")
+    parser.add_argument("--paper", action="store_true", help="paper scale, 550 epochs, end to end")
+    parser.add_argument("--n-traj", type=int, default=10, help="trajectories per domain")
+    parser.add_argument("--samples", type=int, default=600, help="control steps per trajectory")
+    parser.add_argument("--epochs", type=int, default=3, help="timed epochs (< stretch_every)")
+    parser.add_argument("--seeds", type=int, nargs="+", default=[1, 3], help="vmapped seed counts")
+    parser.add_argument("--k", type=int, nargs="+", default=None, help="hold factors timed")
+    parser.add_argument("--paper-seeds", type=int, default=1, help="seeds of the --paper run")
+    parser.add_argument("--tag", default="", help="suffix of the output file names")
+    args = parser.parse_args(argv)
+
+    config = train_lib.TrainConfig()
+    fwd = ForwardModel()
+    n_traj = 50 + config.n_val if args.paper else args.n_traj
+    data = synthetic_data(n_traj, args.samples, config)
+    x0 = jnp.zeros((1, 1, 6))
+    fc_params = fwd.init(jax.random.PRNGKey(1), x0, jnp.zeros((1, 1, 3)))
+    steps = min(data.source.train.shape[0], data.constrained.train.shape[0]) // config.batch_size
+    device = jax.devices()[0]
+    report = {
+        "device": f"{device.platform}: {device.device_kind}",
+        "n_devices": jax.device_count(),
+        "cpu": cpu_model(),
+        "jax": jax.__version__,
+        "trajectories_per_domain": n_traj,
+        "samples": args.samples,
+        "train_windows": int(data.source.train.shape[0]),
+        "steps_per_epoch": steps,
+        "config": config.to_dict(),
+    }
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    lines = [
+        f"# CCGAN-GP training time ({report['device']}, {report['cpu']})",
+        "",
+        f"{n_traj} trajectories x {args.samples} samples per domain ({config.n_val} held out), "
+        f"window {config.window_length}, batch {config.batch_size}: {steps} steps per epoch; "
+        f"jax {jax.__version__}. Command: `python -m bench.train "
+        f"{' '.join(argv) if argv is not None else ' '.join(__import__('sys').argv[1:])}`.",
+        "",
+    ]
+    if args.paper:
+        seeds = tuple(range(args.paper_seeds))
+        res = run_paper(config, data, fc_params, fwd, seeds)
+        report["paper_run"] = res
+        lines += [
+            "| seeds | epochs | compile (s) | s / epoch | total | paper (PyTorch) |",
+            "|---|---|---|---|---|---|",
+            f"| {len(seeds)} | {res['epochs']} | {res['compile_s']:.1f} | {res['epoch_s']:.3f} "
+            f"| {_hms(res['total_s'])} | {_hms(PAPER_WALL_S)} |",
+        ]
+        name = "train_paper" + args.tag
+    else:
+        ks = args.k or [min(config.stretch_choices), max(config.stretch_choices)]
+        rows = []
+        for n_seeds in args.seeds:
+            for k in ks:
+                r = time_epochs(config, data, fc_params, fwd, n_seeds, k, args.epochs)
+                rows.append(r)
+                print(json.dumps(r))
+        report["timings"] = rows
+        lines += [
+            "| seeds | k | compile (s) | s / epoch | k selection (s) | s / epoch incl. selection |",
+            "|---|---|---|---|---|---|",
+        ]
+        lines += [
+            f"| {r['seeds']} | {r['k']} | {r['compile_s']:.1f} | {r['epoch_s']:.3f} "
+            f"| {r['select_s']:.3f} | {r['epoch_with_select_s']:.3f} |"
+            for r in rows
+        ]
+        name = "train" + args.tag
+    (out / f"{name}.json").write_text(json.dumps(report, indent=2))
+    (out / f"{name}.md").write_text("\n".join(lines) + "\n")
+    print("\n".join(lines))
+
+
+if __name__ == "__main__":
+    main()
