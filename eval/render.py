@@ -1,0 +1,175 @@
+"""Off-screen videos: the D_s arm, the D_c arm under translation, the D_c arm untranslated.
+
+Frames come from a MuJoCo C replay of each program (same valve law and per-substep pressures as
+`mjx_arm.Arm.rollout`), rendered with `mujoco.Renderer`; tip paths are line geoms added to the
+scene with `mujoco.mjv_connector`; panels are labelled with Pillow and written with mediapy.
+"""
+
+from __future__ import annotations
+
+import os
+
+os.environ.setdefault("MUJOCO_GL", "egl")
+
+from pathlib import Path  # noqa: E402
+
+import mediapy  # noqa: E402
+import mujoco  # noqa: E402
+import numpy as np  # noqa: E402
+from PIL import Image, ImageDraw  # noqa: E402
+
+GREEN = np.array([0.1, 0.8, 0.2, 1.0], dtype=np.float32)
+RED = np.array([0.9, 0.1, 0.1, 1.0], dtype=np.float32)
+MAX_TRAIL_SEGMENTS = 150
+#: Tip paths are drawn this far (m) below the arm's lowest tip position.
+TRAIL_DROP_M = 0.04
+
+
+def replay(arm, commands_bar: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """MuJoCo C replay from rest of commands [T, 3] (bar, one per 0.1 s period).
+
+    Returns:
+      (qpos [T, nq] at the end of each period, poses [T, 6] tip position (m) + d3).
+    """
+    m = arm.mj_model
+    d = mujoco.MjData(m)
+    d.qpos[:], d.qvel[:] = arm.rest_qpos, arm.rest_qvel
+    vp = arm.valve
+    ids = arm.actuator_ids
+    tip = arm.tip_site_id
+    commands = np.clip(np.asarray(commands_bar, dtype=np.float64), vp.p_min_bar, vp.p_max_bar)
+    elapsed = arm.timestep_s * np.arange(1, arm.n_substeps + 1)[:, None]
+    pressure = np.full(3, vp.p_min_bar)
+    qpos = np.zeros((len(commands), m.nq))
+    poses = np.zeros((len(commands), 6))
+    for t, command in enumerate(commands):
+        tau = np.where(command >= pressure, vp.tau_rise_s, vp.tau_drop_s)
+        sub = command + (pressure - command) * np.exp(-elapsed / tau)  # [n_substeps, 3]
+        for p in sub:
+            d.ctrl[ids] = p
+            mujoco.mj_step(m, d)
+        pressure = sub[-1]
+        mujoco.mj_kinematics(m, d)
+        qpos[t] = d.qpos
+        poses[t, :3] = d.site_xpos[tip]
+        poses[t, 3:] = d.site_xmat[tip].reshape(3, 3)[:, 2]
+    return qpos, poses
+
+
+def _add_trail(scene, points: np.ndarray, rgba: np.ndarray, width: float = 3.0) -> None:
+    if len(points) < 2:
+        return
+    idx = np.unique(np.linspace(0, len(points) - 1, MAX_TRAIL_SEGMENTS + 1).astype(int))
+    for a, b in zip(idx[:-1], idx[1:], strict=True):
+        if scene.ngeom >= scene.maxgeom:
+            return
+        g = scene.geoms[scene.ngeom]
+        mujoco.mjv_initGeom(
+            g, mujoco.mjtGeom.mjGEOM_LINE, np.zeros(3), np.zeros(3), np.eye(3).ravel(), rgba
+        )
+        mujoco.mjv_connector(g, mujoco.mjtGeom.mjGEOM_LINE, width, points[a], points[b])
+        scene.ngeom += 1
+
+
+def _camera() -> mujoco.MjvCamera:
+    cam = mujoco.MjvCamera()
+    cam.type = mujoco.mjtCamera.mjCAMERA_FREE
+    cam.lookat[:] = (0.0, 0.0, -0.2)
+    cam.distance = 0.3
+    cam.azimuth = 90.0
+    cam.elevation = 60.0  # from below, so the XY path is visible under the hanging arm
+    return cam
+
+
+def _label(frame: np.ndarray, text: str) -> np.ndarray:
+    img = Image.fromarray(frame)
+    ImageDraw.Draw(img).text((6, 4), text, fill=(255, 255, 255))
+    return np.asarray(img)
+
+
+def render_panel(
+    arm, qpos: np.ndarray, own_path: np.ndarray, target_path: np.ndarray, label: str, hw
+) -> list[np.ndarray]:
+    """Frames [N, H, W, 3] uint8 of one arm at the given joint states.
+
+    Args:
+      qpos: [N, nq] joint states, one per frame.
+      own_path: [N, 3] the tip position (m) at each frame; its XY drawn in red up to the frame.
+      target_path: [N, 3] the D_s target tip (m); its XY drawn in green up to the frame.
+      hw: (height, width) pixels.
+    """
+    m = arm.mj_model
+    d = mujoco.MjData(m)
+    cam = _camera()
+    frames = []
+    # The tip sits inside the arm's end cap (radius 3 cm > the ~2 cm deflections), so the paths
+    # are drawn on a plane TRAIL_DROP_M below the lowest target point, where the camera sees them.
+    plane_z = target_path[:, 2].min() - TRAIL_DROP_M
+    own_path = np.concatenate([own_path[:, :2], np.full((len(own_path), 1), plane_z)], axis=1)
+    target_path = np.concatenate(
+        [target_path[:, :2], np.full((len(target_path), 1), plane_z)], axis=1
+    )
+    max_geom = m.ngeom + 4 * MAX_TRAIL_SEGMENTS
+    with mujoco.Renderer(m, height=hw[0], width=hw[1], max_geom=max_geom) as r:
+        for i, q in enumerate(qpos):
+            d.qpos[:] = q
+            mujoco.mj_forward(m, d)
+            r.update_scene(d, camera=cam)
+            _add_trail(r.scene, target_path[: i + 1], GREEN)
+            _add_trail(r.scene, own_path[: i + 1], RED)
+            frames.append(_label(r.render(), label))
+    return frames
+
+
+def _ensure_ffmpeg() -> None:
+    """Points mediapy at the ffmpeg binary shipped by imageio-ffmpeg when none is on PATH."""
+    import shutil
+
+    if shutil.which("ffmpeg") is None:
+        import imageio_ffmpeg
+
+        mediapy.set_ffmpeg(imageio_ffmpeg.get_ffmpeg_exe())
+
+
+def write_video(arm_s, arm_c, traj: dict, cfg, path: Path) -> Path:
+    """Three-panel MP4 for one shape: D_s | D_c translated | D_c untranslated.
+
+    The translated panel uses the first available translator, else the oracle, else stretch.
+    D_c panels are sampled at the end of each source step's k periods, so all panels share the
+    source time axis. Returns the path written.
+    """
+    n_steps = traj["pressures_s"].shape[0]
+    frame_every = max(1, int(round(10.0 * cfg.video_speedup / cfg.video_fps)))
+    frames_at = np.arange(frame_every - 1, n_steps, frame_every)
+    qpos_s, poses_s = replay(arm_s, traj["pressures_s"])
+    target = poses_s[frames_at, :3]
+    panels = [render_panel(arm_s, qpos_s[frames_at], target, target, "D_s", cfg.video_panel_hw)]
+    translated = next(
+        (m for m in ("ccgan", "wcgan", "oracle", "stretch") if m in traj["commands"]), None
+    )
+    for method, label in ((translated, f"D_c {translated}"), ("none", "D_c untranslated")):
+        if method is None or method not in traj["commands"]:
+            continue
+        k = traj["k"][method]
+        qpos_c, poses_c = replay(arm_c, traj["commands"][method])
+        n = min(len(frames_at), poses_c.shape[0] // k)
+        at = (frames_at[:n] + 1) * k - 1
+        panel = render_panel(
+            arm_c, qpos_c[at], poses_c[at, :3], target[:n], label, cfg.video_panel_hw
+        )
+        panel += [panel[-1]] * (len(frames_at) - n)
+        panels.append(panel)
+    frames = [np.concatenate(row, axis=1) for row in zip(*panels, strict=True)]
+    _ensure_ffmpeg()
+    mediapy.write_video(str(path), frames, fps=cfg.video_fps)
+    return path
+
+
+def write_all(arm_s, arm_c, trajectories: dict, cfg, out_dir: Path) -> list[str]:
+    """One video per shape under out_dir; returns the file names."""
+    names = []
+    for shape, traj in trajectories.items():
+        name = f"video_{shape}.mp4"
+        write_video(arm_s, arm_c, traj, cfg, Path(out_dir) / name)
+        names.append(name)
+    return names
