@@ -87,6 +87,23 @@ def _label(frame: np.ndarray, text: str) -> np.ndarray:
     return np.asarray(img)
 
 
+def _ensure_offscreen_gl() -> None:
+    """Uses EGL when mujoco was imported before MUJOCO_GL was set and there is no display.
+
+    mujoco picks its GL backend at import; a process that imported it first (e.g. through
+    mjx_arm) without MUJOCO_GL would try GLFW, which needs an X display.
+    """
+    from mujoco.rendering.classic import gl_context
+
+    if os.environ.get("DISPLAY") or os.environ.get("MUJOCO_GL", "egl") != "egl":
+        return
+    if gl_context.GLContext is None or gl_context.GLContext.__module__ != "mujoco.egl":
+        os.environ.setdefault("PYOPENGL_PLATFORM", "egl")
+        from mujoco.egl import GLContext
+
+        gl_context.GLContext = GLContext
+
+
 def render_panel(
     arm, qpos: np.ndarray, own_path: np.ndarray, target_path: np.ndarray, label: str, hw
 ) -> list[np.ndarray]:
@@ -109,6 +126,7 @@ def render_panel(
     target_path = np.concatenate(
         [target_path[:, :2], np.full((len(target_path), 1), plane_z)], axis=1
     )
+    _ensure_offscreen_gl()
     max_geom = m.ngeom + 4 * MAX_TRAIL_SEGMENTS
     with mujoco.Renderer(m, height=hw[0], width=hw[1], max_geom=max_geom) as r:
         for i, q in enumerate(qpos):

@@ -1,0 +1,152 @@
+"""Tests of eval/: shape programs, metrics, and a tiny end-to-end run (3-segment arm, CPU)."""
+
+import dataclasses
+import json
+
+import numpy as np
+import pytest
+
+import eval  # noqa: F401  (first: sets MUJOCO_GL before mujoco is imported)
+import mjx_arm  # (before jax)
+from eval import metrics, pipeline, render, shapes
+
+
+@pytest.fixture(scope="module")
+def small_xml():
+    return mjx_arm.generate_xml(dataclasses.replace(mjx_arm.ArmParams(), n_segments=3))
+
+
+@pytest.mark.parametrize("name", list(shapes.SHAPES))
+def test_shape_programs_in_valve_range(name):
+    p = shapes.SHAPES[name](60.0)
+    assert p.shape == (600, 3)
+    assert np.isfinite(p).all()
+    assert p.min() >= shapes.P_LOW_BAR and p.max() <= shapes.P_HIGH_BAR
+    # Every shape moves: each chamber swings by at least 1 bar.
+    assert (np.ptp(p, axis=0) > 1.0).all()
+
+
+@pytest.mark.parametrize("name", shapes.PERIODIC_SHAPES)
+def test_periodic_shapes_repeat_every_30_s(name):
+    p = shapes.SHAPES[name](60.0)
+    np.testing.assert_allclose(p[:300], p[300:], atol=1e-9)
+    assert not np.allclose(p[:150], p[150:300])  # ...and not with half the period
+
+
+def test_circle_is_three_phased_sinusoids():
+    p = shapes.circle(60.0)
+    t = np.arange(600) / 10.0
+    expected0 = shapes.P_MID_BAR + shapes.AMPLITUDE_BAR * np.sin(2 * np.pi * t / 30.0)
+    np.testing.assert_allclose(p[:, 0], expected0, atol=1e-12)
+    # Chamber 1 lags chamber 0 by 120 deg = 10 s = 100 steps.
+    np.testing.assert_allclose(p[100:, 1], p[:-100, 0], atol=1e-9)
+    # Phases 0/120/240: the mean pressure is constant (pure bending).
+    np.testing.assert_allclose(p.mean(axis=1), shapes.P_MID_BAR, atol=1e-9)
+
+
+def test_damped_circle_shrinks():
+    p = shapes.damped_circle(60.0)
+    assert np.ptp(p[-300:], axis=0).max() < 0.6 * np.ptp(p[:300], axis=0).max()
+
+
+def test_position_error_by_hand():
+    pred = np.array([[0.0, 0.0, 0.0, 0, 0, 1], [0.03, 0.04, 0.0, 0, 0, 1]])
+    target = np.zeros((2, 6))
+    target[:, 5] = 1.0
+    # ||(0.03, 0.04, 0)|| = 0.05 m = 5 cm.
+    np.testing.assert_allclose(metrics.position_error_cm(pred, target), [0.0, 5.0])
+
+
+def test_orientation_error_by_hand():
+    d3 = np.array([[0, 0, 1], [0, 1, 0], [0, 0, -1], [1, 1, 0]], dtype=float)
+    pred = np.concatenate([np.zeros((4, 3)), d3], axis=1)
+    target = np.tile([0, 0, 0, 0, 0, 1.0], (4, 1))
+    target[3, 3:] = [1, 0, 0]
+    # Same: 0; perpendicular: pi/2; opposite: pi; (1,1,0) unnormalised vs (1,0,0): 45 deg.
+    np.testing.assert_allclose(
+        metrics.orientation_error_rad(pred, target), [0, np.pi / 2, np.pi, np.pi / 4], atol=1e-7
+    )
+    # Rounding that pushes the cosine past 1 must not give NaN.
+    almost = np.array([[0, 0, 0, 0, 0, 1 + 1e-15]])
+    assert metrics.orientation_error_rad(almost, target[:1])[0] == 0.0
+
+
+def test_mean_std_and_summary():
+    assert metrics.mean_std([1.0, 3.0]) == (2.0, 1.0)
+    assert metrics.format_mean_std([1.0, 3.0]) == "2.00 ± 1.00"
+    reps = np.zeros((2, 4, 6))
+    reps[1, :, 0] = 0.02  # the two runs are 2 cm apart: each is 1 cm from the mean
+    spread = metrics.repetition_spread_cm(reps)
+    assert spread["spread_cm_mean"] == pytest.approx(1.0)
+    assert spread["spread_cm_max"] == pytest.approx(1.0)
+
+
+def test_stretch_and_every_kth():
+    p = np.arange(6.0).reshape(2, 3)
+    s = pipeline.stretch(p, 3)
+    assert s.shape == (6, 3)
+    np.testing.assert_array_equal(s[:3], np.tile(p[0], (3, 1)))
+    poses = np.arange(12.0)[:, None].repeat(6, axis=1)
+    np.testing.assert_array_equal(pipeline.every_kth(poses, 4)[:, 0], [3, 7, 11])
+
+
+def test_noise_is_clipped_and_zero_mean():
+    p = np.full((4000, 3), 1.75)
+    noisy = pipeline.add_noise(p, 0.1, seed=0)
+    assert noisy.min() >= 0 and noisy.max() <= 3.5
+    assert abs(noisy.mean() / 3.5 - 0.5) < 0.01
+    assert abs((noisy / 3.5).std() - 0.1) < 0.01
+    np.testing.assert_array_equal(noisy, pipeline.add_noise(p, 0.1, seed=0))
+
+
+def test_replay_matches_rollout(small_xml):
+    arm = mjx_arm.load(xml=small_xml, domain="source")
+    p = shapes.circle(2.0)
+    _, poses = render.replay(arm, p)
+    ref = arm.rollout(p, backend="c")
+    np.testing.assert_allclose(poses[:, :3], ref[:, :3], atol=1e-3)
+
+
+def test_tiny_end_to_end(small_xml, tmp_path):
+    cfg = pipeline.EvalConfig(
+        shapes=("circle",),
+        methods=("none", "stretch", "ccgan", "wcgan"),
+        seeds=(0,),
+        duration_s=2.0,
+        stretch_candidates=(1, 2),
+        validation_duration_s=1.0,
+        noise_stds=(0.1,),
+        n_repeats=2,
+        render=True,
+        out_dir=str(tmp_path),
+        xml=small_xml,
+        video_speedup=1.0,
+        video_fps=10,
+        video_panel_hw=(96, 128),
+    )
+    results = pipeline.evaluate(cfg, command="test", log=lambda *_: None)
+    data = json.loads((tmp_path / "shapes.json").read_text())
+    row = data["table"]["circle"]["stretch"]
+    assert np.isfinite(row["x_err_cm_mean"]) and row["k"] in (1, 2)
+    assert data["table"]["circle"]["none"]["k"] == 1
+    assert data["wall_time_s"] > 0 and data["machine"]
+    md = (tmp_path / "shapes.md").read_text()
+    assert "| circle |" in md and "Noise test" in md and "Periodicity test" in md
+    # Translators absent or untrained: skipped with a note, never given numbers.
+    for method in ("ccgan", "wcgan"):
+        if method not in results["methods_run"]:
+            assert method not in data["table"]["circle"]
+            assert any(method.upper() in n for n in data["notes"])
+    spread = data["periodicity"]["circle"]["stretch"]["spread_cm_max"]
+    assert spread < 1e-9  # deterministic simulator and method: identical repetitions
+    video = tmp_path / "video_circle.mp4"
+    assert video.exists() and video.stat().st_size > 0
+    import imageio_ffmpeg
+
+    frames = imageio_ffmpeg.read_frames(str(video))
+    meta = next(frames)
+    w, h = meta["size"]
+    first = np.frombuffer(next(frames), np.uint8).reshape(h, w, 3)
+    assert w == 3 * 128 and h == 96
+    assert first.std() > 5.0  # not a blank frame
+    assert (tmp_path / "shape_circle.png").exists()
