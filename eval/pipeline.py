@@ -14,12 +14,15 @@ Methods:
            EvalConfig.stretch_candidates = {1, 5, 10, ..., 30}: the GAN's set {5, ..., 30} plus 1.
   ccgan    the trained CCGAN-GP translator `ccgan.load_translator(path)` (skipped with a note
            when none is available).
-  wcgan    the WCGAN-GP baseline translator, if the ccgan package can load one.
+  wcgan    the WCGAN-GP baseline translator: a translator checkpoint given by --wcgan-path or
+           found at results/wcgan/translator.ckpt.
   oracle   D_c commands [T * k, 3] optimised directly through the differentiable MJX rollout with
            optax Adam (k = the stretch k), commands kept in the valve range by a sigmoid, starting
            from the stretch program; a lower reference for the other methods. Backward passes
            through MJX are slow on CPU, so by default the oracle optimises (and every method's
-           ratio to it is computed over) the first `OracleConfig.horizon_s` seconds only.
+           ratio to it is computed over) the first `OracleConfig.horizon_s` seconds only, and
+           the CLI leaves it out on CPU unless asked (measured here: ~25 ms per physics step
+           for the backward pass, and ~2 min to compile the gradient even for 3 segments).
 """
 
 from __future__ import annotations
@@ -41,6 +44,10 @@ from eval import metrics, shapes
 
 METHODS = ("none", "stretch", "ccgan", "wcgan", "oracle")
 TRANSLATOR_METHODS = ("ccgan", "wcgan")
+#: Where the WCGAN-GP baseline's translator checkpoint is looked for when no path is given.
+WCGAN_DEFAULT_PATH = (
+    Path(__file__).resolve().parent.parent / "results" / "wcgan" / "translator.ckpt"
+)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -208,11 +215,13 @@ def load_translator(method: str, cfg: EvalConfig) -> tuple[Translator | None, st
             obj = loader(path=cfg.ccgan_path)
         elif cfg.wcgan_path is not None:
             obj = loader(path=cfg.wcgan_path)
+        elif WCGAN_DEFAULT_PATH.exists():
+            obj = loader(path=WCGAN_DEFAULT_PATH)
         else:
             try:
                 obj = loader(path=None, kind="wcgan")
             except TypeError:
-                return None, "no WCGAN-GP translator (pass --wcgan-path)"
+                return None, f"no WCGAN-GP translator at {WCGAN_DEFAULT_PATH} (or --wcgan-path)"
     except Exception as err:  # noqa: BLE001
         return None, f"no trained {method} translator ({type(err).__name__}: {err})"
     if obj is None:
