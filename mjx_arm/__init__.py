@@ -20,6 +20,11 @@ CPU_FUSION_FLAG_NEEDED = _jaxlib_version() < (0, 11)
 if CPU_FUSION_FLAG_NEEDED and CPU_FUSION_FLAG not in _os.environ.get("XLA_FLAGS", ""):
     _os.environ["XLA_FLAGS"] = (_os.environ.get("XLA_FLAGS", "") + " " + CPU_FUSION_FLAG).strip()
 
+# Off-screen rendering: without a display, GLFW cannot make a context; EGL can. MuJoCo reads the
+# variable when it is first imported, which is here for every user of the package.
+if not _os.environ.get("DISPLAY"):
+    _os.environ.setdefault("MUJOCO_GL", "egl")
+
 import contextlib as _contextlib  # noqa: E402
 import io as _io  # noqa: E402
 

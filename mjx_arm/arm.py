@@ -162,7 +162,9 @@ class Arm:
         """Simulates pressure programs from rest and returns the tip pose after each command.
 
         Commands outside [0, 3.5] bar saturate like a real valve; commands under the valve floor
-        (0.2 bar) act as the floor. The pose of each period is read at its last physics step.
+        (0.2 bar) act as the floor. The pose of each period is the one MuJoCo computes in the
+        forward pass of the period's last physics step, i.e. of the state one timestep (4 ms)
+        before the period ends; both backends read it at that same instant.
 
         Args:
           pressures_bar: [T, 3] or [B, T, 3] chamber commands (bar) at 10 Hz.
