@@ -21,8 +21,9 @@ import mujoco
 import numpy as np
 
 import mjx_arm
-from bench.throughput import cpu_model, programs
+from bench.throughput import programs
 from mjx_arm import ArmParams, generate_xml
+from mjx_arm.machine import cpu_model
 
 REFERENCE_STEP_S = 0.0005
 

@@ -15,7 +15,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import platform
 import time
 from pathlib import Path
 
@@ -26,19 +25,10 @@ import numpy as np
 from ccgan import data as data_lib
 from ccgan import train as train_lib
 from ccgan.models import ForwardModel
+from mjx_arm.machine import cpu_model
 
 #: The paper's training time for one CCGAN-GP (12 h 32 min).
 PAPER_WALL_S = 12 * 3600 + 32 * 60
-
-
-def cpu_model() -> str:
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                return line.split(":", 1)[1].strip()
-    except OSError:
-        pass
-    return platform.processor() or "unknown CPU"
 
 
 def synthetic_data(n_traj: int, samples: int, config: train_lib.TrainConfig, seed: int = 0):

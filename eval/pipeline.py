@@ -32,7 +32,6 @@ import dataclasses
 import inspect
 import json
 import os
-import platform
 import sys
 import time
 from pathlib import Path
@@ -115,16 +114,11 @@ class EvalConfig:
 
 def machine_description() -> str:
     """The CPU model (from /proc/cpuinfo), core count, and the JAX device kind."""
-    cpu = platform.processor() or "unknown CPU"
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                cpu = line.split(":", 1)[1].strip()
-                break
-    except OSError:
-        pass
     import jax
 
+    from mjx_arm.machine import cpu_model
+
+    cpu = cpu_model()
     dev = jax.devices()[0]
     return f"{cpu}, {os.cpu_count()} cores; JAX device: {dev.platform} ({dev.device_kind})"
 

@@ -23,7 +23,6 @@ import dataclasses
 import functools
 import json
 import math
-import platform
 import sys
 import time
 from pathlib import Path
@@ -36,6 +35,7 @@ import numpy as np
 import mjx_arm
 from mjx_arm import constants, cosserat, valve
 from mjx_arm.arm import time_constant_63
+from mjx_arm.machine import cpu_model
 from mjx_arm.model_gen import ArmParams, generate_xml
 
 STATIC_PRESSURES_BAR = (1.0, 2.0, 3.5)
@@ -51,17 +51,6 @@ BABBLE_HOLD_PERIODS = (5, 30)
 VARIANTS = ("committed", 5, 20)
 DOMAINS = ("source", "constrained")
 NO_VALVE = valve.ValveParams(tau_rise_s=1e-9, tau_drop_s=1e-9)
-
-
-def cpu_model() -> str:
-    """The CPU's model name from /proc/cpuinfo (falls back to `platform.processor()`)."""
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                return line.split(":", 1)[1].strip()
-    except OSError:
-        pass
-    return platform.processor() or "unknown"
 
 
 def babble_program(seed: int, seconds: float = BABBLE_SECONDS) -> np.ndarray:
