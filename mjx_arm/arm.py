@@ -229,7 +229,7 @@ class Arm:
         ok = np.ones((n_batch, n_periods), dtype=bool)
         nthread = min(os.cpu_count() or 1, n_batch)
         datas = [mujoco.MjData(m) for _ in range(nthread)]
-        sensor_pos = m.sensor("tip_pos").adr[0] if _has_sensor(m, "tip_pos") else None
+        sensor_pos = _tip_pose_sensor_adr(m)
         with mj_rollout.Rollout(nthread=nthread) as pool:
             for start in range(0, n_periods, chunk_periods):
                 stop = min(start + chunk_periods, n_periods)
@@ -246,13 +246,16 @@ class Arm:
                 times = out_state[:, :, 0]
                 expected = state[:, :1] + self.timestep_s * np.arange(1, ctrl.shape[1] + 1)
                 fine = np.isfinite(out_state).all(-1) & np.isclose(times, expected, atol=1e-6)
-                last = out_state[:, self.n_substeps - 1 :: self.n_substeps]
                 ok[:, start:stop] = fine[:, self.n_substeps - 1 :: self.n_substeps]
                 if sensor_pos is not None:
                     sd = sensordata[:, self.n_substeps - 1 :: self.n_substeps]
                     poses[:, start:stop] = sd[..., sensor_pos : sensor_pos + POSE_DIM]
                 else:
-                    poses[:, start:stop] = self._poses_from_states(last)
+                    # Sensors see the state before each step's integration; so do these states.
+                    before = np.concatenate([state[:, None], out_state[:, :-1]], axis=1)
+                    poses[:, start:stop] = self._poses_from_states(
+                        before[:, self.n_substeps - 1 :: self.n_substeps]
+                    )
                 state = out_state[:, -1].copy()
         # Once diverged, stay diverged (MuJoCo C resets the state after a bad step).
         ok = np.logical_and.accumulate(ok, axis=1)
@@ -282,24 +285,21 @@ class Arm:
         )
 
 
-def _has_sensor(m: mujoco.MjModel, name: str) -> bool:
+def _tip_pose_sensor_adr(m: mujoco.MjModel) -> int | None:
+    """Address in sensordata of the tip pose, if the model has framepos + framezaxis sensors of the
+    tip site named tip_pos and tip_d3, adjacent; None otherwise (poses then come from states)."""
     try:
-        m.sensor(name)
+        pos, d3 = m.sensor("tip_pos"), m.sensor("tip_d3")
     except KeyError:
-        return False
-    # The fast path needs framepos then framezaxis of the tip site, adjacent in sensordata.
-    pos, d3 = m.sensor(name), None
-    try:
-        d3 = m.sensor("tip_d3")
-    except KeyError:
-        return False
-    return (
+        return None
+    adjacent = (
         pos.type[0] == mujoco.mjtSensor.mjSENS_FRAMEPOS
         and d3.type[0] == mujoco.mjtSensor.mjSENS_FRAMEZAXIS
         and d3.adr[0] == pos.adr[0] + 3
         and pos.objid[0] == m.site(constants.TIP_SITE).id
         and d3.objid[0] == pos.objid[0]
     )
+    return int(pos.adr[0]) if adjacent else None
 
 
 def _chunk_controls(pressure, commands, arm: Arm, nu: int) -> np.ndarray:

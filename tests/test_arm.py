@@ -167,3 +167,15 @@ def test_twenty_segment_mjx_step_on_cpu_is_fast():
     per_step = (time.perf_counter() - start) / n_steps
     print(f"\n20-segment MJX step on CPU: {per_step * 1e3:.1f} ms")
     assert per_step < 0.25
+
+
+def test_mjcf_without_pose_sensors_gives_the_same_c_poses(small_xml):
+    start, stop = small_xml.index("  <sensor>"), small_xml.index("</sensor>") + len("</sensor>\n")
+    bare = mjx_arm.load(xml=small_xml[:start] + small_xml[stop:])
+    assert bare.mj_model.nsensor == 0
+    program = np.repeat(np.array([[3.0, 0.2, 1.0], [0.5, 2.5, 0.2]]), 5, axis=0)
+    np.testing.assert_allclose(
+        bare.rollout(program, backend="c"),
+        mjx_arm.load(xml=small_xml).rollout(program, backend="c"),
+        atol=1e-12,
+    )
