@@ -29,31 +29,9 @@ def replay(arm, commands_bar: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """MuJoCo C replay from rest of commands [T, 3] (bar, one per 0.1 s period).
 
     Returns:
-      (qpos [T, nq] at the end of each period, poses [T, 6] tip position (m) + d3).
+      (qpos [T, nq], poses [T, 6] tip position (m) + d3), at the instants `arm.rollout` reads.
     """
-    m = arm.mj_model
-    d = mujoco.MjData(m)
-    d.qpos[:], d.qvel[:] = arm.rest_qpos, arm.rest_qvel
-    vp = arm.valve
-    ids = arm.actuator_ids
-    tip = arm.tip_site_id
-    commands = np.clip(np.asarray(commands_bar, dtype=np.float64), vp.p_min_bar, vp.p_max_bar)
-    elapsed = arm.timestep_s * np.arange(1, arm.n_substeps + 1)[:, None]
-    pressure = np.full(3, vp.p_min_bar)
-    qpos = np.zeros((len(commands), m.nq))
-    poses = np.zeros((len(commands), 6))
-    for t, command in enumerate(commands):
-        tau = np.where(command >= pressure, vp.tau_rise_s, vp.tau_drop_s)
-        sub = command + (pressure - command) * np.exp(-elapsed / tau)  # [n_substeps, 3]
-        for p in sub:
-            d.ctrl[ids] = p
-            mujoco.mj_step(m, d)
-        pressure = sub[-1]
-        mujoco.mj_kinematics(m, d)
-        qpos[t] = d.qpos
-        poses[t, :3] = d.site_xpos[tip]
-        poses[t, 3:] = d.site_xmat[tip].reshape(3, 3)[:, 2]
-    return qpos, poses
+    return arm.rollout_with_qpos(commands_bar)
 
 
 def _add_trail(scene, points: np.ndarray, rgba: np.ndarray, width: float = 3.0) -> None:

@@ -188,6 +188,18 @@ class Arm:
         _raise_if_diverged(ok)
         return poses if np.ndim(pressures_bar) == 3 else poses[0]
 
+    def rollout_with_qpos(self, pressures_bar) -> tuple[np.ndarray, np.ndarray]:
+        """`rollout` on MuJoCo C that also returns the joint positions, e.g. to render the arm.
+
+        Returns:
+          (qpos [T, nq] or [B, T, nq], poses [T, 6] or [B, T, 6]), both at the instant `rollout`
+          reads the pose.
+        """
+        batched = check_pressures(pressures_bar)
+        poses, ok, qpos = self._rollout_c(batched, with_qpos=True)
+        _raise_if_diverged(ok)
+        return (qpos, poses) if np.ndim(pressures_bar) == 3 else (qpos[0], poses[0])
+
     def rollout_fn(self):
         """The pure JAX rollout: `fn(mjx_model, commands [T, 3] bar) -> (poses [T, 6], ok [T])`.
 
@@ -213,7 +225,7 @@ class Arm:
         poses, ok = self._jit_batched(self.mjx_model, commands)
         return np.asarray(poses, dtype=np.float64), np.asarray(ok)
 
-    def _rollout_c(self, batched: np.ndarray, chunk_periods: int = 50):
+    def _rollout_c(self, batched: np.ndarray, chunk_periods: int = 50, with_qpos: bool = False):
         m = self.mj_model
         n_batch, n_periods, _ = batched.shape
         spec = mujoco.mjtState.mjSTATE_FULLPHYSICS
@@ -227,6 +239,7 @@ class Arm:
         commands = valve.saturate(batched, self.valve, xp=np)
         poses = np.zeros((n_batch, n_periods, POSE_DIM))
         ok = np.ones((n_batch, n_periods), dtype=bool)
+        qpos = np.zeros((n_batch, n_periods, m.nq)) if with_qpos else None
         nthread = min(os.cpu_count() or 1, n_batch)
         datas = [mujoco.MjData(m) for _ in range(nthread)]
         sensor_pos = _tip_pose_sensor_adr(m)
@@ -247,19 +260,20 @@ class Arm:
                 expected = state[:, :1] + self.timestep_s * np.arange(1, ctrl.shape[1] + 1)
                 fine = np.isfinite(out_state).all(-1) & np.isclose(times, expected, atol=1e-6)
                 ok[:, start:stop] = fine[:, self.n_substeps - 1 :: self.n_substeps]
+                # Sensors see the state before each step's integration; so do these states.
+                before = np.concatenate([state[:, None], out_state[:, :-1]], axis=1)
+                before = before[:, self.n_substeps - 1 :: self.n_substeps]
                 if sensor_pos is not None:
                     sd = sensordata[:, self.n_substeps - 1 :: self.n_substeps]
                     poses[:, start:stop] = sd[..., sensor_pos : sensor_pos + POSE_DIM]
                 else:
-                    # Sensors see the state before each step's integration; so do these states.
-                    before = np.concatenate([state[:, None], out_state[:, :-1]], axis=1)
-                    poses[:, start:stop] = self._poses_from_states(
-                        before[:, self.n_substeps - 1 :: self.n_substeps]
-                    )
+                    poses[:, start:stop] = self._poses_from_states(before)
+                if with_qpos:
+                    qpos[:, start:stop] = before[..., 1 : 1 + m.nq]  # full state: time, qpos, ...
                 state = out_state[:, -1].copy()
         # Once diverged, stay diverged (MuJoCo C resets the state after a bad step).
         ok = np.logical_and.accumulate(ok, axis=1)
-        return poses, ok
+        return (poses, ok, qpos) if with_qpos else (poses, ok)
 
     def _poses_from_states(self, states: np.ndarray) -> np.ndarray:
         """Poses [..., 6] of full-physics states [..., nstate], via forward kinematics."""

@@ -102,9 +102,16 @@ def test_noise_is_clipped_and_zero_mean():
 def test_replay_matches_rollout(small_xml):
     arm = mjx_arm.load(xml=small_xml, domain="source")
     p = shapes.circle(2.0)
-    _, poses = render.replay(arm, p)
-    ref = arm.rollout(p, backend="c")
-    np.testing.assert_allclose(poses[:, :3], ref[:, :3], atol=1e-3)
+    qpos, poses = render.replay(arm, p)
+    np.testing.assert_allclose(poses, arm.rollout(p, backend="c"), atol=1e-12)
+    # The joint positions are those of the poses: forward kinematics gives the same tip.
+    import mujoco
+
+    data = mujoco.MjData(arm.mj_model)
+    for t in (0, len(p) // 2, len(p) - 1):
+        data.qpos[:] = qpos[t]
+        mujoco.mj_kinematics(arm.mj_model, data)
+        np.testing.assert_allclose(data.site_xpos[arm.tip_site_id], poses[t, :3], atol=1e-12)
 
 
 def test_tiny_end_to_end(small_xml, tmp_path):
