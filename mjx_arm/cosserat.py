@@ -49,6 +49,10 @@ from mjx_arm.model_gen import ArmParams
 
 _ARM = ArmParams()
 
+#: Density of the paper simulator's rod (kg/m^3) [paper code]. The reference rod uses it, so the
+#: paper's per-mass damping constants give the paper's medium (force per length c rho A); the
+#: MuJoCo arm keeps the paper text's 183 g and has its medium fitted (`mjx_arm.fit`).
+PAPER_DENSITY_KG_M3 = 1104.0
 #: Translational damping constants (1/s) of the paper's two domains [paper code].
 DOMAIN_DAMPING_PER_S = {"source": 800.0, "constrained": 8000.0}
 #: Pose layout: tip position (m) then unit d3.
@@ -59,16 +63,17 @@ POSE_DIM = 6
 class CosseratParams:
     """Physical and numerical parameters of the reference rod.
 
-    Geometry and material default to `mjx_arm.model_gen.ArmParams`, so both models describe the
-    same arm; damping defaults to the paper's source domain.
+    Geometry and elasticity default to `mjx_arm.model_gen.ArmParams`'s physical values (never
+    its fitted factors), density to the paper code's 1104 kg/m^3, damping to the paper's source
+    domain.
     """
 
     length_m: float = _ARM.length_m
     """Rod length (m)."""
     radius_m: float = _ARM.radius_m
     """Cross-section radius (m)."""
-    mass_kg: float = _ARM.mass_kg
-    """Total mass (kg), spread uniformly."""
+    mass_kg: float = PAPER_DENSITY_KG_M3 * math.pi * _ARM.radius_m**2 * _ARM.length_m
+    """Total mass (kg), spread uniformly [paper code's density: 0.624 kg for 0.2 m]."""
     youngs_modulus_pa: float = _ARM.youngs_modulus_pa
     """Young's modulus E (Pa)."""
     shear_modulus_pa: float = _ARM.shear_modulus_pa

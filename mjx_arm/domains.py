@@ -12,6 +12,8 @@ import math
 import mujoco
 import numpy as np
 
+from mjx_arm.fitted import FIT
+
 #: Explicit (Euler) fluid drag is stable while timestep * drag rate stays below 2; keep a margin.
 DRAG_STEP_MARGIN = 0.5
 #: Explicit joint springs are stable while timestep * natural frequency stays below 2.
@@ -22,9 +24,11 @@ SPRING_STEP_MARGIN = 1.0
 class Domain:
     """A world for the arm.
 
-    The built-in domains are `source` (D_s, the model's own medium) and `constrained` (D_c, the
-    medium ten times more viscous, as in the paper). Statics do not depend on viscosity, so both
-    hold the same pose under a held pressure; only the dynamics differ.
+    The built-in domains are `source` (D_s, the model's own medium), `constrained` (D_c, the
+    paper's medium with ten times the per-mass damping; on this chain that is the viscosity scale
+    fitted to the reference rod by `python -m mjx_arm.fit`) and `aged` (stiffness x 0.7 in the
+    constrained medium). Statics do not depend on viscosity, so source and constrained hold the
+    same pose under a held pressure; only the dynamics differ.
     """
 
     name: str = "custom"
@@ -53,8 +57,8 @@ class Domain:
 
 
 SOURCE = Domain(name="source")
-CONSTRAINED = Domain(name="constrained", viscosity_scale=10.0)
-AGED = Domain(name="aged", stiffness_scale=0.7, viscosity_scale=10.0)
+CONSTRAINED = Domain(name="constrained", viscosity_scale=FIT["constrained_viscosity_scale"])
+AGED = Domain(name="aged", stiffness_scale=0.7, viscosity_scale=FIT["constrained_viscosity_scale"])
 DOMAINS = {d.name: d for d in (SOURCE, CONSTRAINED, AGED)}
 
 

@@ -10,8 +10,10 @@ against `mjx_arm.cosserat` with 20 elements and the paper's damping constants (8
   * babbling: tip position RMS error and d3 angle error over 60 s of seeded pseudo-random
     pressures (random targets held for random durations).
 
-Nothing is fitted: the MuJoCo medium is a calibrated fluid viscosity and the rod's damping is the
-paper's per-mass constant, so the dynamics are expected to differ; the tables say by how much.
+The committed model's stiffness, chamber gain and media were fitted to the same rod by
+`python -m mjx_arm.fit` on other babbling programs (seeds 100-102, holds of 0.5-10 s); every
+number here is on held-out programs.
+The 5- and 20-segment chains reuse the 10-segment fit (drag per length, viscosity scale).
 
 Run `python -m mjx_arm.fidelity`; it writes results/fidelity.md and results/fidelity.json.
 """
@@ -23,6 +25,7 @@ import dataclasses
 import functools
 import json
 import math
+import os
 import sys
 import time
 from pathlib import Path
@@ -53,15 +56,18 @@ DOMAINS = ("source", "constrained")
 NO_VALVE = valve.ValveParams(tau_rise_s=1e-9, tau_drop_s=1e-9)
 
 
-def babble_program(seed: int, seconds: float = BABBLE_SECONDS) -> np.ndarray:
+def babble_program(
+    seed: int, seconds: float = BABBLE_SECONDS, hold_periods: tuple[int, int] = BABBLE_HOLD_PERIODS
+) -> np.ndarray:
     """Pseudo-random commands [T, 3] (bar) at 10 Hz: uniform targets in [0.2, 3.5] bar per
-    chamber, all three held together for a random 0.5-3 s, then redrawn."""
+    chamber, all three held together for a random number of control periods in `hold_periods`
+    (default 0.5-3 s), then redrawn."""
     rng = np.random.default_rng(seed)
     n_periods = int(round(seconds * constants.CONTROL_HZ))
     program = np.empty((n_periods, 3))
     t = 0
     while t < n_periods:
-        hold = int(rng.integers(BABBLE_HOLD_PERIODS[0], BABBLE_HOLD_PERIODS[1] + 1))
+        hold = int(rng.integers(hold_periods[0], hold_periods[1] + 1))
         program[t : t + hold] = rng.uniform(constants.P_MIN_BAR, constants.P_MAX_BAR, 3)
         t += hold
     return program
@@ -228,7 +234,9 @@ def compare(variant, domain: str, ref: dict) -> dict:
         for name, use_valve in (("valve", True), ("no_valve", False))
     }
 
+    t0 = time.perf_counter()
     babble = arm.rollout(ref["programs"], backend="c")
+    babble_wall = time.perf_counter() - t0
     pos_err = np.linalg.norm(babble[..., :3] - ref["babble"][..., :3], axis=-1)
     ang_err = angle_between(babble[..., 3:], ref["babble"][..., 3:])
     rod_motion = np.linalg.norm(ref["babble"][..., :3] - ref["rest"][:3], axis=-1)
@@ -260,6 +268,10 @@ def compare(variant, domain: str, ref: dict) -> dict:
             "d3_mean_error_rad": float(ang_err.mean()),
             "d3_max_error_rad": float(ang_err.max()),
             "rod_tip_rms_motion_m": float(np.sqrt(np.mean(rod_motion**2))),
+            "mujoco_c_sim_s_per_wall_s": float(
+                babble.shape[0] * babble.shape[1] / 10 / babble_wall
+            ),
+            "mujoco_c_threads": int(min(os.cpu_count() or 1, babble.shape[0])),
         },
     }
 
@@ -287,6 +299,7 @@ def run(n_elements: int = 20) -> dict:
             "timestep_s": params.timestep_s,
             "damping_per_s": {d: refs[d]["params"].damping_per_s for d in DOMAINS},
             "rotational_damping": params.rotational_damping,
+            "mass_kg": params.mass_kg,
             "shear_coefficient": params.shear_coefficient,
             "rest_pose": refs["source"]["rest"].tolist(),
             "paper_geometry_t63_s": paper,
@@ -317,16 +330,20 @@ def to_markdown(results: dict) -> str:
         f" {c['timestep_s'] * 1e6:.1f} us, translational damping {c['damping_per_s']['source']:g}"
         f" 1/s (source) and {c['damping_per_s']['constrained']:g} 1/s (constrained), rotational"
         f" {c['rotational_damping']:g}. Same geometry, material, chamber forces and valves as"
-        " the MuJoCo model; nothing fitted. Errors are absolute and as % of the arm length"
-        f" ({length * 100:g} cm).",
+        " the MuJoCo model, except the rod's density: the paper code's 1104 kg/m^3"
+        f" ({c['mass_kg']:.3f} kg), so the per-mass damping constants are the paper's media;"
+        " the MuJoCo arm keeps the paper's 183 g. The committed model's stiffness, chamber gain"
+        " and media were fitted to this rod by `python -m mjx_arm.fit` (models/softarm_fit.json)"
+        " on other babbling programs; everything below is held out. Errors are absolute and as"
+        f" % of the arm length ({length * 100:g} cm).",
         "",
         "Check of the rod's dynamics against PyElastica: with the paper code's geometry"
         f" ({c['paper_geometry_t63_s']['length_m']:g} m, {c['paper_geometry_t63_s']['mass_kg']:.3f}"
         " kg) a step of chamber 0's force reaches 63% after"
         f" {c['paper_geometry_t63_s']['source']:.3f} s (c = 800) and"
         f" {c['paper_geometry_t63_s']['constrained']:.2f} s (c = 8000); PyElastica 1.0 measured"
-        " about 0.25 s and 5.3 s (shared/notes/paper-facts.md). Our arm (0.2 m, 0.183 kg) is"
-        " about 3x lighter per length, hence the faster rod times below.",
+        " about 0.25 s and 5.3 s (shared/notes/paper-facts.md). The reference below is 0.2 m"
+        " long, hence its slightly slower times.",
         "",
         "## Statics: each chamber alone, others at the 0.2 bar floor",
         "",
@@ -386,11 +403,13 @@ def to_markdown(results: dict) -> str:
         "Targets uniform in [0.2, 3.5] bar per chamber, held together for"
         f" {p['babble_hold_periods'][0]}-{p['babble_hold_periods'][1]} control periods; poses"
         " compared at every 10 Hz sample. 'rod motion' is the RMS tip distance from rest in the"
-        " rod, for scale.",
+        " rod, for scale. 'MuJoCo C sim s/s': simulated seconds per wall second of these"
+        " rollouts (`mujoco.rollout`, one thread per trajectory, this CPU): the speed side of"
+        " the segment-count trade-off (MJX on a GPU: bench/results).",
         "",
         "| model | domain | tip RMS error mm | % L | tip max error mm | d3 mean error mrad |"
-        " d3 max error mrad | rod motion RMS mm |",
-        "|---|---|---|---|---|---|---|---|",
+        " d3 max error mrad | rod motion RMS mm | MuJoCo C sim s/s |",
+        "|---|---|---|---|---|---|---|---|---|",
     ]
     for row in results["rows"]:
         b = row["babble"]
@@ -398,7 +417,7 @@ def to_markdown(results: dict) -> str:
             f"| {row['model']} | {row['domain']} | {b['tip_rms_error_m'] * 1e3:.2f} |"
             f" {b['tip_rms_error_pct_length']:.2f} | {b['tip_max_error_m'] * 1e3:.2f} |"
             f" {b['d3_mean_error_rad'] * 1e3:.1f} | {b['d3_max_error_rad'] * 1e3:.1f} |"
-            f" {b['rod_tip_rms_motion_m'] * 1e3:.2f} |"
+            f" {b['rod_tip_rms_motion_m'] * 1e3:.2f} | {b['mujoco_c_sim_s_per_wall_s']:.0f} |"
         )
     return "\n".join(lines) + "\n"
 

@@ -1,10 +1,16 @@
 """Generate ``models/softarm.xml`` from one physical-parameter dataclass.
 
-The arm is a chain of rigid capsule segments hanging from a fixed base. Each segment carries a
-ball joint (bend and twist) and a slide joint (stretch) at its top, with stiffness derived from the
-rod's E, A, I over the segment length. Three chambers are spatial tendons through sites 20 mm off
-the axis; a positive actuator force on a tendon lengthens it, as a pressurised chamber pushes its
-end caps apart.
+The arm is a chain of rigid capsule segments hanging from a fixed base. Each segment carries two
+bending hinges, a twist hinge and a slide joint (stretch) at its top, with stiffness derived from
+the rod's E, G, A, I over the segment length. Each chamber is a fixed tendon: its length is the
+small-angle length of a fibre 20 mm off the axis (stretch plus offset times bend over every joint
+the chamber spans), so a chamber force F puts the constant couple F r and the axial force F on
+each spanned joint in its own frame: the internal load of a pressurised chamber, as in the
+Cosserat reference. A positive actuator force lengthens the tendon, as a pressurised chamber
+pushes its end caps apart.
+
+Stiffness, chamber gain and the medium's drag carry the factors fitted to the reference rod by
+``python -m mjx_arm.fit`` (stored in ``models/softarm_fit.json``).
 
 Run ``python -m mjx_arm.model_gen`` to rewrite the committed model; ``--check`` only compares.
 """
@@ -18,6 +24,7 @@ import sys
 from pathlib import Path
 
 from mjx_arm import constants
+from mjx_arm.fitted import FIT
 
 
 @dataclasses.dataclass(frozen=True)
@@ -25,8 +32,9 @@ class ArmParams:
     """Physical and numerical parameters of the arm model.
 
     Sources: [paper] Kushawaha et al., "Domain Translation of a Soft Robotic Arm using Conditional
-    Cycle GAN"; [code] the authors' public `utils/i_supportModelParam.py`; [calib] measured here by
-    `python -m mjx_arm.calibrate` (see its docstring); [choice] a modelling choice explained inline.
+    Cycle GAN"; [code] the authors' public `utils/i_supportModelParam.py`; [fit] fitted to the
+    reference Cosserat rod by `python -m mjx_arm.fit` (`models/softarm_fit.json`); [choice] a
+    modelling choice explained inline.
     """
 
     length_m: float = 0.2
@@ -54,11 +62,17 @@ class ArmParams:
     timestep_s: float = 0.004
     """Physics timestep (s) [choice: bench/timestep.py measures speed and error against 0.5 ms;
     stability at this step comes from `Domain.inertia_scale`]."""
-    medium_drag_ns_per_m2: float = 2057.0
+    medium_drag_ns_per_m2: float = FIT["medium_drag_ns_per_m2"]
     """Viscous drag of the source domain's medium on the arm, force per unit length per unit
-    speed (N s/m^2) [calib: `python -m mjx_arm.calibrate` fits the paper's 0.25 s mechanical
-    step response; for comparison, the paper code's 800 1/s on its 1104 kg/m^3 rod is
+    speed (N s/m^2) [fit; for comparison, the reference's 800 1/s on its 1104 kg/m^3 rod is
     2497 N s/m^2]. The MJCF's viscosity is derived from it per segment count."""
+    stiffness_scale: float = FIT["stiffness_scale"]
+    """Multiplies the bend, twist and stretch stiffness derived from E and G [fit]."""
+    chamber_gain_scale: float = FIT["chamber_gain_scale"]
+    """Multiplies the chamber force per bar, pressure x lumen area [fit]."""
+    constrained_viscosity_scale: float = FIT["constrained_viscosity_scale"]
+    """Viscosity of the constrained medium over the source's [fit to the reference's 8000 vs
+    800 1/s]. Recorded in the MJCF header; `mjx_arm.domains.CONSTRAINED` applies it."""
     bend_armature_scale: float = 4.0
     """Joint armature of each ball joint, as a multiple of the segment's own rotational inertia
     about its top [choice: slows only the segment-local modes so explicit drag stays stable at
@@ -67,8 +81,9 @@ class ArmParams:
     """Slide-joint armature as a multiple of the segment mass [choice: as above, axial mode]."""
     euler_implicit_damping: bool = False
     """Keep MuJoCo's implicit joint-damping pass in the Euler step [choice: the joints carry no
-    damping (the medium does all of it), so the pass, an extra factorisation of the mass matrix
-    every step, is switched off with `<flag eulerdamp="disable"/>`]."""
+    damping (the reference rod has no material damping; the medium does all of it), so the
+    pass, an extra factorisation of the mass matrix every step, is switched off with
+    `<flag eulerdamp="disable"/>`]."""
 
     @property
     def drag_diameter_m(self) -> float:
@@ -110,17 +125,25 @@ class ArmParams:
 
     @property
     def bend_stiffness_nm_per_rad(self) -> float:
-        """E I / l: one joint stands for one segment length of rod."""
-        return self.youngs_modulus_pa * self.second_moment_m4 / self.segment_length_m
+        """s E I / l (s = stiffness_scale): one joint stands for one segment length of rod."""
+        e_i = self.youngs_modulus_pa * self.second_moment_m4
+        return self.stiffness_scale * e_i / self.segment_length_m
 
     @property
     def twist_stiffness_nm_per_rad(self) -> float:
-        """G J / l (J = 2 I). Reported only: MuJoCo's ball-joint spring is isotropic."""
-        return self.shear_modulus_pa * 2.0 * self.second_moment_m4 / self.segment_length_m
+        """s G J / l with J = 2 I."""
+        g_j = self.shear_modulus_pa * 2.0 * self.second_moment_m4
+        return self.stiffness_scale * g_j / self.segment_length_m
 
     @property
     def stretch_stiffness_n_per_m(self) -> float:
-        return self.youngs_modulus_pa * self.area_m2 / self.segment_length_m
+        """s E A / l."""
+        return self.stiffness_scale * self.youngs_modulus_pa * self.area_m2 / self.segment_length_m
+
+    @property
+    def chamber_gain_n_per_bar(self) -> float:
+        """Chamber force per bar: gain scale x lumen area x 1e5 Pa/bar."""
+        return self.chamber_gain_scale * self.chamber_area_m2 * constants.BAR_TO_PA
 
     @property
     def chamber_area_m2(self) -> float:
@@ -156,7 +179,13 @@ class ArmParams:
             if isinstance(value, float) and not math.isfinite(value):
                 raise ValueError(f"{field.name} must be finite, got {value}")
         positive = ("length_m", "radius_m", "mass_kg", "youngs_modulus_pa", "timestep_s")
-        for name in positive + ("medium_drag_ns_per_m2",):
+        fitted = (
+            "medium_drag_ns_per_m2",
+            "stiffness_scale",
+            "chamber_gain_scale",
+            "constrained_viscosity_scale",
+        )
+        for name in positive + fitted:
             if getattr(self, name) <= 0.0:
                 raise ValueError(f"{name} must be > 0 (a zero viscosity drops MJX's fluid code)")
 
@@ -166,24 +195,37 @@ def _f(x: float) -> str:
     return f"{x:.6g}"
 
 
-def _chamber_sites(params: ArmParams) -> list[list[tuple[int, float]]]:
-    """For each segment, the local z (m, <= 0) of chamber sites it carries.
+def chamber_span_weights(params: ArmParams) -> list[tuple[int, float, float]]:
+    """How much of each joint's rod the chamber covers, as (segment, stretch, bend) fractions.
 
-    Sites sit at the bottom of every segment that ends inside the chamber, plus one where the
-    chamber ends. Returned as a list over segments of (segment index, local z) pairs.
+    A slide joint stands for its own segment [i l, (i + 1) l]; the bending hinges at the top of
+    segment i stand for the rod around them, [i l - l/2, i l + l/2] (the base ones for
+    [0, l/2], hence their doubled stiffness). A chamber of length L_c adds its couple and
+    force in proportion to the overlap with [0, L_c], so the lumped chain bends and stretches by
+    exactly F r L_c / (E I) and F L_c / (E A) for any segment count. Only joints with a nonzero
+    fraction are listed.
     """
-    seg = params.segment_length_m
-    sites: list[list[tuple[int, float]]] = [[] for _ in range(params.n_segments)]
-    eps = 1e-9
+    seg, span = params.segment_length_m, params.chamber_length_m
+
+    def overlap(lo: float, hi: float) -> float:
+        return max(0.0, min(hi, span) - max(lo, 0.0)) / (hi - max(lo, 0.0))
+
+    weights = []
     for i in range(params.n_segments):
-        bottom = (i + 1) * seg
-        if bottom <= params.chamber_length_m + eps:
-            sites[i].append((i, -seg))
-    end_segment = min(int((params.chamber_length_m - eps) // seg), params.n_segments - 1)
-    end_local = -(params.chamber_length_m - end_segment * seg)
-    if not sites[end_segment] or abs(sites[end_segment][-1][1] - end_local) > eps:
-        sites[end_segment].append((end_segment, end_local))
-    return sites
+        stretch = overlap(i * seg, (i + 1) * seg)
+        bend = overlap(i * seg - seg / 2, i * seg + seg / 2)
+        if stretch > 1e-9 or bend > 1e-9:
+            weights.append((i, stretch, bend))
+    return weights
+
+
+def chamber_offsets_m(params: ArmParams) -> list[tuple[float, float]]:
+    """(x, y) of each chamber's centre in a segment's frame (m), at 0, 120, 240 degrees."""
+    angles = [2.0 * math.pi * k / 3.0 for k in range(3)]
+    return [
+        (params.chamber_offset_m * math.cos(a), params.chamber_offset_m * math.sin(a))
+        for a in angles
+    ]
 
 
 def generate_xml(params: ArmParams = ArmParams()) -> str:
@@ -192,44 +234,47 @@ def generate_xml(params: ArmParams = ArmParams()) -> str:
     p = params
     seg = p.segment_length_m
     inertia = p.segment_inertia_kgm2
-    angles = [2.0 * math.pi * k / 3.0 for k in range(3)]
-    offsets = [(p.chamber_offset_m * math.cos(a), p.chamber_offset_m * math.sin(a)) for a in angles]
-    gain = p.chamber_area_m2 * constants.BAR_TO_PA
-    sites_per_segment = _chamber_sites(p)
+    offsets = chamber_offsets_m(p)
+    weights = chamber_span_weights(p)
 
     header = f"""<!--
   Soft pneumatic arm (I-Support module) as a chain of {p.n_segments} rigid segments.
   GENERATED by `python -m mjx_arm.model_gen` from mjx_arm.model_gen.ArmParams: do not edit by hand.
 
   Sources: [paper] Kushawaha et al., Domain Translation of a Soft Robotic Arm using CCGAN;
-  [code] the authors' utils/i_supportModelParam.py; [calib] mjx_arm.calibrate;
-  [choice] see ArmParams.
+  [code] the authors' utils/i_supportModelParam.py; [fit] `python -m mjx_arm.fit` against the
+  reference Cosserat rod (models/softarm_fit.json); [choice] see ArmParams.
     length {_f(p.length_m)} m [paper ~0.202, code 0.19], radius {_f(p.radius_m)} m [paper, code],
     mass {_f(p.mass_kg)} kg [paper 183 g], E {_f(p.youngs_modulus_pa)} Pa [code],
     Poisson {_f(p.poisson_ratio)} so G = {_f(p.shear_modulus_pa)} Pa [code],
     gravity {_f(p.gravity_mps2)} m/s^2 [code].
-  Per segment (l = {_f(seg)} m, m = {_f(p.segment_mass_kg)} kg, solid-cylinder inertia):
-    ball-joint stiffness E*I/l = {_f(p.bend_stiffness_nm_per_rad)} N m/rad (I = pi r^4/4);
-      the base joint stands for the half segment at the clamp, so 2*E*I/l: this places each
+  Per segment (l = {_f(seg)} m, m = {_f(p.segment_mass_kg)} kg, solid-cylinder inertia),
+  stiffness scaled by {_f(p.stiffness_scale)} [fit]:
+    bending hinges (x, y) s*E*I/l = {_f(p.bend_stiffness_nm_per_rad)} N m/rad (I = pi r^4/4),
+    twist hinge (z) s*G*J/l = {_f(p.twist_stiffness_nm_per_rad)} N m/rad (J = 2 I);
+      the base joints stand for the half segment at the clamp, so twice these: this places each
       joint's compliance at the centroid of the rod it lumps and makes the tip deflection under
       a uniform moment exact for any segment count [choice];
-      MuJoCo's ball spring is isotropic, so twist uses E*I/l, not G*J/l = \
-{_f(p.twist_stiffness_nm_per_rad)} [choice];
-    slide-joint stiffness E*A/l = {_f(p.stretch_stiffness_n_per_m)} N/m (A = pi r^2);
-    armature: ball {_f(p.bend_armature_kgm2)} kg m^2, slide {_f(p.stretch_armature_kg)} kg
+    slide-joint stiffness s*E*A/l = {_f(p.stretch_stiffness_n_per_m)} N/m (A = pi r^2);
+    armature: hinges {_f(p.bend_armature_kgm2)} kg m^2, slide {_f(p.stretch_armature_kg)} kg
       [choice, see ArmParams]; no joint damping: the medium damps the arm.
-  Chambers: 3 spatial tendons, {_f(p.chamber_offset_m)} m off the axis at 0/120/240 deg
-    [paper, code], {_f(p.chamber_length_m)} m long [paper]; force = pressure x lumen area
-    pi (r_out - wall)^2 = {_f(p.chamber_area_m2)} m^2 [code geometry], so gain
-    {_f(gain)} N/bar; ctrl is the chamber pressure in bar, 0..{_f(constants.P_MAX_BAR)} [paper].
+  Chambers: 3 fixed tendons, {_f(p.chamber_offset_m)} m off the axis at 0/120/240 deg
+    [paper, code], spanning {_f(p.chamber_length_m)} m from the base [paper] (each joint
+    weighted by the share of its rod inside the span, see chamber_span_weights);
+    force = pressure x lumen area pi (r_out - wall)^2 = {_f(p.chamber_area_m2)} m^2
+    [code geometry] x {_f(p.chamber_gain_scale)} [fit],
+    so gain {_f(p.chamber_gain_n_per_bar)} N/bar; ctrl is the chamber pressure in bar,
+    0..{_f(constants.P_MAX_BAR)} [paper].
   Valves: first order toward the command, tau rise {_f(constants.VALVE_TAU_RISE_S)} s,
     drop {_f(constants.VALVE_TAU_DROP_S)} s, floor {_f(constants.P_MIN_BAR)} bar [paper, code].
     MuJoCo's filter dynamics has one time constant, so mjx_arm.valve applies the valve and
     these numbers travel in <custom>.
-  Medium: drag {_f(p.medium_drag_ns_per_m2)} N s/m^2 per length [calib], so viscosity
+  Medium: drag {_f(p.medium_drag_ns_per_m2)} N s/m^2 per length [fit], so viscosity
     {_f(p.viscosity_pa_s)} Pa s on these segments, for the source domain; the constrained
-    domain scales it by 10 [paper]. Integrator Euler (MJX has no implicitfast with fluid drag),
-    timestep {_f(p.timestep_s)} s [choice], dense Jacobians, contacts off (the arm touches nothing).
+    domain scales it by {_f(p.constrained_viscosity_scale)} [fit to the paper's 10x per-mass
+    damping].
+    Integrator Euler (MJX has no implicitfast with fluid drag), timestep {_f(p.timestep_s)} s
+    [choice], dense Jacobians, contacts off (the arm touches nothing).
 -->
 """
     lines = [header.rstrip("\n"), '<mujoco model="softarm">']
@@ -254,10 +299,9 @@ def generate_xml(params: ArmParams = ArmParams()) -> str:
         f'      <geom type="capsule" size="{_f(p.radius_m)}" contype="0" conaffinity="0"'
         ' rgba="0.85 0.55 0.35 1"/>'
     )
-    lines.append('      <site type="sphere" size="0.002" rgba="0.2 0.4 0.9 1"/>')
     lines.append('      <default class="bend">')
     lines.append(
-        f'        <joint type="ball" stiffness="{_f(p.bend_stiffness_nm_per_rad)}"'
+        f'        <joint type="hinge" stiffness="{_f(p.bend_stiffness_nm_per_rad)}"'
         f' armature="{_f(p.bend_armature_kgm2)}"/>'
     )
     lines.append("      </default>")
@@ -270,8 +314,8 @@ def generate_xml(params: ArmParams = ArmParams()) -> str:
     lines.append("    </default>")
     lines.append('    <default class="chamber">')
     lines.append(
-        f'      <general gainprm="{_f(gain)}" ctrlrange="0 {_f(constants.P_MAX_BAR)}"'
-        ' dyntype="none" biastype="none"/>'
+        f'      <general gainprm="{_f(p.chamber_gain_n_per_bar)}"'
+        f' ctrlrange="0 {_f(constants.P_MAX_BAR)}" dyntype="none" biastype="none"/>'
     )
     lines.append("    </default>")
     lines.append("  </default>")
@@ -281,29 +325,29 @@ def generate_xml(params: ArmParams = ArmParams()) -> str:
         '    <geom name="mount" type="box" size="0.05 0.05 0.005" pos="0 0 0.005"'
         ' contype="0" conaffinity="0" rgba="0.3 0.3 0.3 1"/>'
     )
-    for k, (x, y) in enumerate(offsets):
-        lines.append(f'    <site name="chamber_{k}_base" pos="{_f(x)} {_f(y)} 0" size="0.002"/>')
 
     indent = "    "
     for i in range(p.n_segments):
         pos = "0 0 0" if i == 0 else f"0 0 {_f(-seg)}"
         lines.append(f'{indent}<body name="seg_{i}" pos="{pos}" childclass="segment">')
         inner = indent + "  "
-        if i == 0:
-            base_stiffness = _f(2.0 * p.bend_stiffness_nm_per_rad)
-            lines.append(f'{inner}<joint name="bend_0" class="bend" stiffness="{base_stiffness}"/>')
-        else:
-            lines.append(f'{inner}<joint name="bend_{i}" class="bend"/>')
+        base = i == 0
+        bend = _f((2.0 if base else 1.0) * p.bend_stiffness_nm_per_rad)
+        twist = _f((2.0 if base else 1.0) * p.twist_stiffness_nm_per_rad)
+        for axis, vector, stiffness in (("x", "1 0 0", bend), ("y", "0 1 0", bend)):
+            stiff = f' stiffness="{stiffness}"' if base else ""
+            lines.append(
+                f'{inner}<joint name="bend_{i}_{axis}" class="bend" axis="{vector}"{stiff}/>'
+            )
+        lines.append(
+            f'{inner}<joint name="twist_{i}" class="bend" axis="0 0 1" stiffness="{twist}"/>'
+        )
         lines.append(f'{inner}<joint name="stretch_{i}" class="stretch"/>')
         lines.append(
             f'{inner}<inertial pos="0 0 {_f(-seg / 2)}" mass="{_f(p.segment_mass_kg)}"'
             f' diaginertia="{_f(inertia[0])} {_f(inertia[1])} {_f(inertia[2])}"/>'
         )
         lines.append(f'{inner}<geom name="seg_{i}" fromto="0 0 0 0 0 {_f(-seg)}"/>')
-        for j, (_, local_z) in enumerate(sites_per_segment[i]):
-            for k, (x, y) in enumerate(offsets):
-                name = f"chamber_{k}_s{i}_{j}"
-                lines.append(f'{inner}<site name="{name}" pos="{_f(x)} {_f(y)} {_f(local_z)}"/>')
         if i == p.n_segments - 1:
             # quat (0 1 0 0) turns the site half a turn about x, so its z axis points down the arm.
             lines.append(
@@ -316,14 +360,17 @@ def generate_xml(params: ArmParams = ArmParams()) -> str:
         lines.append(f"{indent}</body>")
     lines.append("  </worldbody>")
 
+    # A fibre at (x, y) lengthens by q_stretch - y q_bend_x + x q_bend_y over one joint.
     lines.append("  <tendon>")
-    for k in range(3):
-        lines.append(f'    <spatial name="chamber_{k}" width="0.003" rgba="0.2 0.4 0.9 0.6">')
-        lines.append(f'      <site site="chamber_{k}_base"/>')
-        for i in range(p.n_segments):
-            for j, _ in enumerate(sites_per_segment[i]):
-                lines.append(f'      <site site="chamber_{k}_s{i}_{j}"/>')
-        lines.append("    </spatial>")
+    for k, (x, y) in enumerate(offsets):
+        lines.append(f'    <fixed name="chamber_{k}">')
+        for i, stretch, bend in weights:
+            terms = (("stretch", stretch), ("bend_{i}_x", -y * bend), ("bend_{i}_y", x * bend))
+            for joint, coef in terms:
+                if abs(coef) > 1e-12:
+                    name = f"stretch_{i}" if joint == "stretch" else joint.format(i=i)
+                    lines.append(f'      <joint joint="{name}" coef="{_f(coef)}"/>')
+        lines.append("    </fixed>")
     lines.append("  </tendon>")
 
     lines.append("  <actuator>")

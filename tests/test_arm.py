@@ -73,7 +73,7 @@ def test_each_chamber_bends_away_and_all_three_lengthen(source_arm):
 
 
 def test_constrained_domain_same_statics_but_slower(source_arm, constrained_arm):
-    program = np.concatenate([_held([0.2, 0.2, 0.2], 0.1), _held([3.5, 0.2, 0.2], 14.9)])
+    program = np.concatenate([_held([0.2, 0.2, 0.2], 0.1), _held([3.5, 0.2, 0.2], 39.9)])
     times = np.arange(1, len(program) + 1) * 0.1
     t63 = {}
     finals = {}

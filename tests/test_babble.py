@@ -134,7 +134,7 @@ def test_babble_datasets_and_shared_bounds(datasets, arm):
     # Same programs in both domains? No: separate streams.
     assert not np.array_equal(datasets[0].pressures_bar, datasets[2].pressures_bar)
     # The constrained arm lags: its poses differ under babbling although statics agree.
-    assert datasets[2].domain_fields["viscosity_scale"] == 10.0
+    assert datasets[2].domain_fields["viscosity_scale"] == mjx_arm.CONSTRAINED.viscosity_scale
 
 
 def test_normalise_round_trip():

@@ -134,7 +134,7 @@ def test_batched_rollout_has_the_right_shape_and_no_nan():
 def test_held_pressure_rollout_reaches_the_static_pose():
     params = dataclasses.replace(CosseratParams(), n_elements=5)
     command = np.array([2.0, P_MIN_BAR, P_MIN_BAR])
-    poses = cosserat.rollout(np.tile(command, (30, 1)), params)  # 3 s, valve included
+    poses = cosserat.rollout(np.tile(command, (60, 1)), params)  # 6 s, valve included
     np.testing.assert_allclose(poses[-1], cosserat.static_pose(command, params), atol=1e-5)
     rest = cosserat.static_pose(np.full(3, P_MIN_BAR), params)
     np.testing.assert_allclose(cosserat.rest_state(params).x[-1], rest[:3], atol=1e-12)

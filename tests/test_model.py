@@ -24,8 +24,17 @@ def test_segment_counts_compile_with_chamber_ending_at_its_length(n_segments):
     d = mujoco.MjData(m)
     mujoco.mj_forward(m, d)
     assert m.nu == 3 and m.ntendon == 3
-    # A straight arm: each chamber tendon runs from the base to the chamber's end.
-    np.testing.assert_allclose(d.ten_length, params.chamber_length_m, atol=1e-6)  # 6-digit XML
+    # Each chamber's fixed tendon stretches by exactly the chamber's length per unit strain.
+    seg = params.segment_length_m
+    for k in range(3):
+        adr, num = m.tendon_adr[k], m.tendon_num[k]
+        stretch = [
+            m.wrap_prm[w]
+            for w in range(adr, adr + num)
+            if m.joint(int(m.wrap_objid[w])).name.startswith("stretch_")
+        ]
+        assert sum(stretch) * seg == pytest.approx(params.chamber_length_m, rel=1e-5)
+    np.testing.assert_allclose(d.ten_length, 0.0, atol=1e-12)  # fixed tendons: zero at qpos0
     np.testing.assert_allclose(m.body_mass[1:].sum(), params.mass_kg, rtol=1e-5)
     tip = m.site(constants.TIP_SITE).id
     np.testing.assert_allclose(d.site_xpos[tip], [0, 0, -params.length_m], atol=1e-6)
@@ -54,3 +63,26 @@ def test_ten_seconds_of_random_pressures_raise_no_mujoco_warning(domain):
     ]
     assert np.isfinite(d.qpos).all()
     assert d.time == pytest.approx(10.0)
+
+
+def test_chamber_force_bends_a_free_chain_into_the_rods_arc():
+    """A chamber force F puts the couple F r on every spanned joint: without gravity the tip
+    slope is F r L_c / (E I) (pure bending over the chamber span), the rod's closed form."""
+    params = dataclasses.replace(
+        ArmParams(), gravity_mps2=0.0, stiffness_scale=1.0, chamber_gain_scale=1.0
+    )
+    arm = mjx_arm.load(xml=generate_xml(params), domain=mjx_arm.Domain(inertia_scale=None))
+    m = arm.mj_model
+    d = mujoco.MjData(m)
+    d.qpos[:] = arm.rest_qpos
+    d.ctrl[:] = [2.0, 0.0, 0.0]
+    mujoco.mj_step(m, d, nstep=20000)
+    force = 2.0 * params.chamber_gain_n_per_bar
+    e_i = params.youngs_modulus_pa * params.second_moment_m4
+    slope = force * params.chamber_offset_m * params.chamber_length_m / e_i
+    d3 = d.site_xmat[m.site(constants.TIP_SITE).id].reshape(3, 3)[:, 2]
+    rest_d3 = np.array([0.0, 0.0, -1.0])
+    angle = np.arccos(np.clip(d3 @ rest_d3, -1, 1))
+    assert angle == pytest.approx(slope, rel=0.02)
+    # Chamber 0 sits at +x: lengthening it bends the arm toward -x.
+    assert d.site_xpos[m.site(constants.TIP_SITE).id][0] < -0.005
