@@ -21,9 +21,14 @@ if CPU_FUSION_FLAG_NEEDED and CPU_FUSION_FLAG not in _os.environ.get("XLA_FLAGS"
     _os.environ["XLA_FLAGS"] = (_os.environ.get("XLA_FLAGS", "") + " " + CPU_FUSION_FLAG).strip()
 
 # Off-screen rendering: without a display, GLFW cannot make a context; EGL can. MuJoCo reads the
-# variable when it is first imported, which is here for every user of the package.
-if not _os.environ.get("DISPLAY"):
-    _os.environ.setdefault("MUJOCO_GL", "egl")
+# variable when it is first imported, which is here for every user of the package. Where no EGL
+# library exists (e.g. a headless GPU node without libEGL), MuJoCo would fail to import with
+# MUJOCO_GL=egl, so the variable is left alone and only rendering is unavailable.
+if not _os.environ.get("DISPLAY") and "MUJOCO_GL" not in _os.environ:
+    import ctypes.util as _ctypes_util
+
+    if _ctypes_util.find_library("EGL"):
+        _os.environ["MUJOCO_GL"] = "egl"
 
 import contextlib as _contextlib  # noqa: E402
 import io as _io  # noqa: E402
