@@ -93,6 +93,8 @@ class EvalConfig:
     """Output folder."""
     xml: str | None = None
     """MJCF text of the arm (None: the committed model); tests pass a 3-segment arm."""
+    target_domain: str = "constrained"
+    """The domain translated into (D_c): "constrained", or "aged" for the second pair."""
     ccgan_path: str | None = None
     """Checkpoint for ccgan.load_translator (None: the translator's default)."""
     wcgan_path: str | None = None
@@ -124,13 +126,13 @@ def machine_description() -> str:
 
 
 def load_arms(cfg: EvalConfig):
-    """(D_s arm, D_c arm) from cfg.xml or the committed model."""
+    """(D_s arm, D_c arm in cfg.target_domain) from cfg.xml or the committed model."""
     if cfg.xml is not None:
         return (
             mjx_arm.load(xml=cfg.xml, domain="source"),
-            mjx_arm.load(xml=cfg.xml, domain="constrained"),
+            mjx_arm.load(xml=cfg.xml, domain=cfg.target_domain),
         )
-    return mjx_arm.load(domain="source"), mjx_arm.load(domain="constrained")
+    return mjx_arm.load(domain="source"), mjx_arm.load(domain=cfg.target_domain)
 
 
 # ------------------------------------------------------------------------------------ methods
@@ -641,6 +643,12 @@ def parse_args(argv: list[str] | None = None) -> EvalConfig:
     p.add_argument("--render", action="store_true", help="write MP4 videos")
     p.add_argument("--quick", action="store_true", help="10 s programs, one seed, no oracle")
     p.add_argument("--no-robustness", action="store_true", help="skip noise/periodicity tests")
+    p.add_argument(
+        "--target-domain",
+        default="constrained",
+        choices=["constrained", "aged"],
+        help="D_c: the paper's viscous medium, or the aged arm (stiffness x0.7, same medium)",
+    )
     p.add_argument("--ccgan-path", default=None)
     p.add_argument("--wcgan-path", default=None)
     p.add_argument("--oracle-steps", type=int, default=OracleConfig.steps)
@@ -676,6 +684,7 @@ def parse_args(argv: list[str] | None = None) -> EvalConfig:
         out_dir=a.out,
         ccgan_path=a.ccgan_path,
         wcgan_path=a.wcgan_path,
+        target_domain=a.target_domain,
         oracle=OracleConfig(steps=a.oracle_steps, horizon_s=horizon),
     )
     if a.quick:
@@ -691,7 +700,6 @@ def parse_args(argv: list[str] | None = None) -> EvalConfig:
 
 def main(argv: list[str] | None = None) -> dict:
     """Thin entry point: parse flags, evaluate, print the wall time."""
-    os.environ.setdefault("MUJOCO_GL", "egl")
     cfg = parse_args(argv)
     command = "python -m eval.shapes " + " ".join(sys.argv[1:] if argv is None else argv)
     t0 = time.perf_counter()

@@ -456,7 +456,12 @@ def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
         description="Simulate pseudo-random pressure programs and save babbling datasets.",
     )
     p.add_argument("--preset", choices=["paper"], help="paper: 50 + 3 x 60 s, both domains")
-    p.add_argument("--domain", default="both", help="source, constrained, aged, or both")
+    p.add_argument(
+        "--domain",
+        default="both",
+        help="source, constrained, aged, both (= source,constrained) or a comma list such as"
+        " source,aged (one shared task-space normalisation over the listed domains)",
+    )
     p.add_argument("--n", type=int, help="training trajectories per domain (default 50)")
     p.add_argument("--n-val", type=int, help="validation trajectories per domain (default 3)")
     p.add_argument("--duration", type=float, help="seconds per trajectory (default 60)")
@@ -480,7 +485,9 @@ def config_from_args(args: argparse.Namespace) -> BabbleConfig:
         "seed": args.seed,
         "backend": args.backend,
         "chunk": args.chunk,
-        "domains": ("source", "constrained") if args.domain == "both" else (args.domain,),
+        "domains": ("source", "constrained")
+        if args.domain == "both"
+        else tuple(d.strip() for d in args.domain.split(",")),
     }
     for field, value in (
         ("n_train", args.n),
