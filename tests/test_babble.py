@@ -272,3 +272,12 @@ print("ok")
         [sys.executable, "-c", code], env=env, capture_output=True, text=True, timeout=300
     )
     assert out.returncode == 0 and out.stdout.strip().endswith("ok"), out.stderr[-3000:]
+
+
+def test_domain_flag_takes_both_or_a_list():
+    both = babble.config_from_args(babble.parse_args(["--preset", "paper"]))
+    assert both.domains == ("source", "constrained") and both.n_train == 50
+    aged = babble.config_from_args(
+        babble.parse_args(["--preset", "paper", "--domain", "source,aged"])
+    )
+    assert aged.domains == ("source", "aged") and aged.n_train == 50

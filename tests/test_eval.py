@@ -144,6 +144,12 @@ def test_tiny_end_to_end(small_xml, tmp_path):
         if method not in results["methods_run"]:
             assert method not in data["table"]["circle"]
             assert any(method.upper() in n for n in data["notes"])
+    if "ccgan" in results["methods_run"]:
+        # Every method's commands are also scored through the CCGAN-GP checkpoint's F_c.
+        for method in results["methods_run"]:
+            fc = data["table"]["circle"][method]["fc_x_err_cm_mean"]
+            assert np.isfinite(fc) and fc >= 0
+        assert "forward model F_c" in md
     spread = data["periodicity"]["circle"]["stretch"]["spread_cm_max"]
     assert spread < 1e-9  # deterministic simulator and method: identical repetitions
     video = tmp_path / "video_circle.mp4"
