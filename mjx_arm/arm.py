@@ -207,7 +207,7 @@ class Arm:
         False once the state is non-finite or exploding; callers must check it.
         """
         return functools.partial(
-            _rollout_single,
+            rollout_program,
             tip_site=self.tip_site_id,
             actuators=tuple(int(i) for i in self.actuator_ids),
             n_substeps=self.n_substeps,
@@ -335,7 +335,7 @@ def _chunk_controls(pressure, commands, arm: Arm, nu: int) -> np.ndarray:
     return ctrl
 
 
-def _rollout_single(
+def rollout_program(
     mjx_model: mjx.Model,
     commands_bar: jnp.ndarray,
     *,
@@ -346,7 +346,19 @@ def _rollout_single(
     rest_qpos: jnp.ndarray,
     rest_qvel: jnp.ndarray,
 ):
-    """One program [T, 3] (bar) -> poses [T, 6] and ok flags [T]; see Arm.rollout_fn."""
+    """One program [T, 3] (bar) -> poses [T, 6] and ok flags [T], in pure JAX.
+
+    `Arm.rollout_fn` binds the keyword arguments to one arm; call this directly to pass the rest
+    state as data (e.g. one compiled function for several domains, as `mjx_arm.babble` does).
+
+    Args:
+      mjx_model: the MJX model (its domain already applied).
+      commands_bar: [T, 3] valve commands (bar) at the control rate.
+      tip_site, actuators: ids of the tip site and the three chamber actuators.
+      n_substeps: physics steps per control period.
+      valve_params: the valve model.
+      rest_qpos, rest_qvel: the state every rollout starts from.
+    """
     dtype = commands_bar.dtype
     data = mjx.make_data(mjx_model)
     data = data.replace(qpos=rest_qpos.astype(dtype), qvel=rest_qvel.astype(dtype))

@@ -259,7 +259,7 @@ def _sharded_fn(devices, tip_site, actuators, n_substeps, valve_params):
     replicated, batch = NamedSharding(mesh, P()), NamedSharding(mesh, P("batch"))
 
     def rollout(mjx_model, rest, commands_bar):
-        return arm_lib._rollout_single(
+        return arm_lib.rollout_program(
             mjx_model,
             commands_bar,
             tip_site=tip_site,
