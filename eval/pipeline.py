@@ -616,27 +616,6 @@ def markdown_report(results: dict) -> str:
                 for m in methods
             ]
             lines.append(f"| {shape} | " + " | ".join(cells) + " |")
-    scored = [
-        m for m in methods if any("fc_x_err_cm_mean" in rows.get(m, {}) for rows in table.values())
-    ]
-    if scored:
-        lines += [
-            "",
-            "The same D_c commands scored through the CCGAN-GP checkpoint's forward model F_c"
-            " (open loop from rest, every k-th pose), as the paper scored its Table I:"
-            " X_err (cm) / phi_err (rad), means.",
-            "",
-            "| shape | " + " | ".join(scored) + " |",
-            "|---|" + "---|" * len(scored),
-        ]
-        for shape, rows in table.items():
-            cells = [
-                f"{rows[m]['fc_x_err_cm_mean']:.3f} / {rows[m]['fc_phi_err_rad_mean']:.3f}"
-                if "fc_x_err_cm_mean" in rows.get(m, {})
-                else "-"
-                for m in scored
-            ]
-            lines.append(f"| {shape} | " + " | ".join(cells) + " |")
     if results["noise"]:
         lines += [
             "",
