@@ -538,6 +538,21 @@ def _k_errors(results: dict) -> str:
     return ", ".join(f"k={k}: {v:.3f}" for k, v in errors.items())
 
 
+def _pair_table(caption: str, table: dict, methods: list, keys: tuple[str, str], digits: int):
+    """Markdown lines of a shape x method table whose cells are two row fields, 'a / b'."""
+    lines = ["", caption, "", "| shape | " + " | ".join(methods) + " |"]
+    lines.append("|---|" + "---|" * len(methods))
+    for shape, rows in table.items():
+        cells = [
+            f"{rows[m][keys[0]]:.{digits}f} / {rows[m][keys[1]]:.{digits}f}"
+            if keys[0] in rows.get(m, {})
+            else "-"
+            for m in methods
+        ]
+        lines.append(f"| {shape} | " + " | ".join(cells) + " |")
+    return lines
+
+
 def markdown_report(results: dict) -> str:
     """The results as markdown: a Table-I-like table, then the robustness tests."""
     table = results["table"]
@@ -582,40 +597,24 @@ def markdown_report(results: dict) -> str:
         m for m in methods if any("fc_x_err_cm_mean" in rows.get(m, {}) for rows in table.values())
     ]
     if scored:
-        lines += [
-            "",
+        lines += _pair_table(
             "The same D_c commands scored through the CCGAN-GP checkpoint's forward model F_c"
             " (open loop from rest, every k-th pose), as the paper scored its Table I:"
             " X_err (cm) / phi_err (rad), means.",
-            "",
-            "| shape | " + " | ".join(scored) + " |",
-            "|---|" + "---|" * len(scored),
-        ]
-        for shape, rows in table.items():
-            cells = [
-                f"{rows[m]['fc_x_err_cm_mean']:.3f} / {rows[m]['fc_phi_err_rad_mean']:.3f}"
-                if "fc_x_err_cm_mean" in rows.get(m, {})
-                else "-"
-                for m in scored
-            ]
-            lines.append(f"| {shape} | " + " | ".join(cells) + " |")
+            table,
+            scored,
+            ("fc_x_err_cm_mean", "fc_phi_err_rad_mean"),
+            digits=3,
+        )
     if "oracle" in methods:
-        lines += [
-            "",
+        lines += _pair_table(
             "Ratio to the oracle (mean X_err / oracle mean X_err; mean phi_err / oracle's),"
             " over the window the oracle optimised:",
-            "",
-            "| shape | " + " | ".join(methods) + " |",
-            "|---|" + "---|" * len(methods),
-        ]
-        for shape, rows in table.items():
-            cells = [
-                f"{rows[m]['x_ratio_to_oracle']:.2f} / {rows[m]['phi_ratio_to_oracle']:.2f}"
-                if m in rows and "x_ratio_to_oracle" in rows[m]
-                else "-"
-                for m in methods
-            ]
-            lines.append(f"| {shape} | " + " | ".join(cells) + " |")
+            table,
+            methods,
+            ("x_ratio_to_oracle", "phi_ratio_to_oracle"),
+            digits=2,
+        )
     if results["noise"]:
         lines += [
             "",
