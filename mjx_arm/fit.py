@@ -14,8 +14,8 @@ The data are tip poses of the rod (`mjx_arm.cosserat`, the paper's density and p
 errors times the arm length, both domains together, over every 10 Hz sample. Stiffness, gain
 and drag can trade off almost freely in an overdamped arm (scaling all three changes nothing but
 the weight of inertia), so a prior keeps stiffness and gain near their physical values and the
-data set their ratios to the drag. Measured: with a prior 10x weaker the fit lowers all three to
-~0.4x (standing in for the rod's 3.4x heavier mass) and the fit error improves by only 2%.
+data set their ratios to the drag. With a much weaker prior the fit lowers all three together,
+standing in for the rod's heavier mass, for almost no gain in fit.
 
 The joints carry no damping: the rod has no material damping, only the medium's.
 
