@@ -14,6 +14,7 @@ Writes train.md and train.json (train_paper.* with --paper) to --out.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import time
 from pathlib import Path
@@ -22,6 +23,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from ccgan import checkpoint
 from ccgan import data as data_lib
 from ccgan import train as train_lib
 from ccgan.models import ForwardModel
@@ -40,6 +42,16 @@ def synthetic_data(n_traj: int, samples: int, config: train_lib.TrainConfig, see
         x = np.cumsum(rng.normal(scale=0.01, size=(n_traj, samples, 6)), axis=1)
         arrays += [p, x.astype(np.float32)]
     return data_lib.prepare(*arrays, config.window_length, config.n_val, config.stride)
+
+
+def babbling_data(folder: Path, config: train_lib.TrainConfig):
+    """Windows of a babbling folder, prepared as `python -m ccgan.train` does."""
+    split = lambda d: [folder / f"{d}_{s}.npz" for s in ("train", "val")]  # noqa: E731
+    ps, xs, bounds = train_lib.load_npz(*split("source"))
+    pc, xc, _ = train_lib.load_npz(*split("constrained"))
+    return data_lib.prepare(
+        ps, xs, pc, xc, config.window_length, config.n_val, config.stride, bounds=bounds
+    )
 
 
 def _block(tree):
@@ -84,6 +96,29 @@ def time_epochs(config, data, fc_params, fwd, n_seeds: int, k: int, epochs: int)
     }
 
 
+def run_paper_to_workdir(config, data, fc_params, fwd, seeds, workdir: Path) -> dict:
+    """The whole run through `train_and_evaluate` (checkpoints, CSV log, translator files)."""
+    t_start = time.perf_counter()
+    state, rows = train_lib.train_and_evaluate(
+        config, data, fc_params, workdir, seeds=seeds, forward_model=fwd, resume=False
+    )
+    total_s = time.perf_counter() - t_start
+    last = [r for r in rows if r["epoch"] == config.epochs]
+    val = [r["val_error_cm"] for r in rows if np.isfinite(r["val_error_cm"])]
+    return {
+        "seeds": list(seeds),
+        "epochs": config.epochs,
+        "compile_s": float("nan"),
+        "total_s": total_s,
+        "epoch_s": total_s / config.epochs,
+        "k_final": [int(r["k"]) for r in last],
+        "val_error_cm_final": [r["val_error_cm"] for r in last],
+        "val_error_cm_best": min(val) if val else None,
+        "workdir": str(workdir),
+        "paper_s": PAPER_WALL_S,
+    }
+
+
 def run_paper(config, data, fc_params, fwd, seeds: tuple[int, ...]) -> dict:
     """The whole run, chunked like `train_and_evaluate` (no files): total wall time."""
     trainer = train_lib.make_trainer(config, data, fc_params, fwd)
@@ -101,6 +136,7 @@ def run_paper(config, data, fc_params, fwd, seeds: tuple[int, ...]) -> dict:
         args = (state, keys, jnp.int32(start)) if n == chunk else (state, keys, jnp.int32(start), n)
         state, metrics = _block(fn(*args))
         ks.append(np.asarray(metrics["k"])[:, -1].tolist())
+        print(f"epoch {start + n}: {time.perf_counter() - t_start:.1f} s, k {ks[-1]}", flush=True)
     total_s = time.perf_counter() - t_start
     return {
         "seeds": list(seeds),
@@ -128,15 +164,48 @@ def main(argv=None) -> None:
     parser.add_argument("--seeds", type=int, nargs="+", default=[1, 3], help="vmapped seed counts")
     parser.add_argument("--k", type=int, nargs="+", default=None, help="hold factors timed")
     parser.add_argument("--paper-seeds", type=int, default=1, help="seeds of the --paper run")
+    parser.add_argument("--paper-epochs", type=int, default=550, help="epochs of the --paper run")
     parser.add_argument("--tag", default="", help="suffix of the output file names")
+    parser.add_argument(
+        "--data",
+        default=None,
+        help="babbling folder ({source,constrained}_{train,val}.npz) instead of synthetic data",
+    )
+    parser.add_argument(
+        "--forward-c", default=None, help="trained F_c checkpoint (default: random F_c)"
+    )
+    parser.add_argument(
+        "--feedback-unroll", type=int, default=None, help="TrainConfig.feedback_unroll"
+    )
+    parser.add_argument(
+        "--workdir",
+        default=None,
+        help="--paper: train through train_and_evaluate into this folder (files included)",
+    )
+    parser.add_argument(
+        "--feedback-impls",
+        nargs="+",
+        default=[train_lib.TrainConfig.feedback_impl],
+        choices=train_lib.FEEDBACK_IMPLS,
+        help="feedback rollout implementations timed (TrainConfig.feedback_impl)",
+    )
     args = parser.parse_args(argv)
 
-    config = train_lib.TrainConfig()
+    config = train_lib.TrainConfig(feedback_impl=args.feedback_impls[0], epochs=args.paper_epochs)
+    if args.feedback_unroll:
+        config = dataclasses.replace(config, feedback_unroll=args.feedback_unroll)
     fwd = ForwardModel()
-    n_traj = 50 + config.n_val if args.paper else args.n_traj
-    data = synthetic_data(n_traj, args.samples, config)
+    if args.data:
+        data = babbling_data(Path(args.data), config)
+        args.samples = data.source.val.shape[1]
+        n_traj = data.source.train.shape[0] * config.stride // args.samples + config.n_val
+    else:
+        n_traj = 50 + config.n_val if args.paper else args.n_traj
+        data = synthetic_data(n_traj, args.samples, config)
     x0 = jnp.zeros((1, 1, 6))
     fc_params = fwd.init(jax.random.PRNGKey(1), x0, jnp.zeros((1, 1, 3)))
+    if args.forward_c:
+        fc_params = checkpoint.load(args.forward_c, target=fc_params)[0]
     steps = min(data.source.train.shape[0], data.constrained.train.shape[0]) // config.batch_size
     device = jax.devices()[0]
     report = {
@@ -157,36 +226,55 @@ def main(argv=None) -> None:
         "",
         f"{n_traj} trajectories x {args.samples} samples per domain ({config.n_val} held out), "
         f"window {config.window_length}, batch {config.batch_size}: {steps} steps per epoch; "
-        f"jax {jax.__version__}. Command: `python -m bench.train "
+        f"feedback rollout {config.feedback_impl}, {config.feedback_unroll} periods per loop "
+        f"iteration; jax {jax.__version__}. Command: `python -m bench.train "
         f"{' '.join(argv) if argv is not None else ' '.join(__import__('sys').argv[1:])}`.",
         "",
     ]
     if args.paper:
         seeds = tuple(range(args.paper_seeds))
-        res = run_paper(config, data, fc_params, fwd, seeds)
+        if args.workdir:
+            res = run_paper_to_workdir(config, data, fc_params, fwd, seeds, Path(args.workdir))
+        else:
+            res = run_paper(config, data, fc_params, fwd, seeds)
+        res["feedback"] = config.feedback_impl
         report["paper_run"] = res
         lines += [
-            "| seeds | epochs | compile (s) | s / epoch | total | paper (PyTorch) |",
-            "|---|---|---|---|---|---|",
-            f"| {len(seeds)} | {res['epochs']} | {res['compile_s']:.1f} | {res['epoch_s']:.3f} "
+            "| feedback | seeds | epochs | compile (s) | s / epoch | total | paper (PyTorch) |",
+            "|---|---|---|---|---|---|---|",
+            f"| {res['feedback']} | {len(seeds)} | {res['epochs']} | {res['compile_s']:.1f} "
+            f"| {res['epoch_s']:.3f} "
             f"| {_hms(res['total_s'])} | {_hms(PAPER_WALL_S)} |",
         ]
+        if args.workdir:
+            lines += [
+                "",
+                f"Through `train_and_evaluate` (checkpoints, CSV, translator files; compile "
+                f"included in the total): final k {res['k_final']}, validation tracking error "
+                f"(through F_c) {res['val_error_cm_final']} cm at the end, best "
+                f"{res['val_error_cm_best']} cm.",
+            ]
         name = "train_paper" + args.tag
     else:
         ks = args.k or [min(config.stretch_choices), max(config.stretch_choices)]
         rows = []
-        for n_seeds in args.seeds:
-            for k in ks:
-                r = time_epochs(config, data, fc_params, fwd, n_seeds, k, args.epochs)
-                rows.append(r)
-                print(json.dumps(r))
+        for impl in args.feedback_impls:
+            conf = dataclasses.replace(config, feedback_impl=impl)
+            for n_seeds in args.seeds:
+                for k in ks:
+                    r = time_epochs(conf, data, fc_params, fwd, n_seeds, k, args.epochs)
+                    r["feedback"] = impl
+                    rows.append(r)
+                    print(json.dumps(r), flush=True)
         report["timings"] = rows
         lines += [
-            "| seeds | k | compile (s) | s / epoch | k selection (s) | s / epoch incl. selection |",
-            "|---|---|---|---|---|---|",
+            "| feedback | seeds | k | compile (s) | s / epoch | k selection (s) "
+            "| s / epoch incl. selection |",
+            "|---|---|---|---|---|---|---|",
         ]
         lines += [
-            f"| {r['seeds']} | {r['k']} | {r['compile_s']:.1f} | {r['epoch_s']:.3f} "
+            f"| {r['feedback']} | {r['seeds']} | {r['k']} | {r['compile_s']:.1f} "
+            f"| {r['epoch_s']:.3f} "
             f"| {r['select_s']:.3f} | {r['epoch_with_select_s']:.3f} |"
             for r in rows
         ]

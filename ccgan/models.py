@@ -6,6 +6,8 @@ in [0, 1]. Sequences are batch-major, `[B, T, features]`.
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import flax.linen as nn
 import jax
 import jax.numpy as jnp
@@ -112,7 +114,14 @@ def forward_stretched_masked(
 
 
 def forward_stretched(
-    model: ForwardModel, params, pressure, pose0, k, k_max: int, unroll: int = 10
+    model: ForwardModel,
+    params,
+    pressure,
+    pose0,
+    k,
+    k_max: int,
+    unroll: int = 10,
+    impl: str = "cell",
 ):
     """F's open-loop response when each command is held k control periods (time stretching).
 
@@ -134,11 +143,15 @@ def forward_stretched(
       k: hold factor, int (traced or static), 1 <= k <= k_max.
       k_max: static upper bound on k (sizes the stored carries).
       unroll: periods per loop iteration (fewer, longer iterations; numerics unchanged).
+      impl: "cell" (the Flax cell, backward by `jax.vjp` of each period) or "lean" (the LSTM
+        written out with the gate matrices fused, activations stored by the forward loop and
+        a hand-written backward: fewer, larger kernels per period).
 
     Returns:
       [B, T, 6] normalised poses after each command's k-th period.
     """
-    fn = _make_stretched(model, k_max, unroll)
+    make = {"cell": _make_stretched, "lean": _make_stretched_lean}[impl]
+    fn = make(model, k_max, unroll)
     return fn(jax.lax.stop_gradient(params), pressure, pose0, jnp.asarray(k, jnp.int32))
 
 
@@ -225,6 +238,173 @@ def _make_stretched(model: ForwardModel, k_max: int, unroll: int):
 
     stretched.defvjp(fwd, bwd)
     return stretched
+
+
+class LstmWeights(NamedTuple):
+    """F's variables with the four gates side by side (Flax gate order i, f, g, o).
+
+    w_in [6 + H, 4H] (rows: pose, then hidden state), w_pressure [3, 4H], b_gate [4H],
+    w_fc [H, F], b_fc [F], w_out [F, 6], b_out [6].
+    """
+
+    w_in: jax.Array
+    w_pressure: jax.Array
+    b_gate: jax.Array
+    w_fc: jax.Array
+    b_fc: jax.Array
+    w_out: jax.Array
+    b_out: jax.Array
+
+
+def lstm_weights(params) -> LstmWeights:
+    """`ForwardModel` variables ({"params": ...}) -> `LstmWeights`."""
+    p = params["params"]
+    cell = next(v for v in p.values() if isinstance(v, dict) and "hi" in v)
+    w_x = jnp.concatenate([cell[f"i{g}"]["kernel"] for g in "ifgo"], 1)  # [6 + 3, 4H]
+    w_h = jnp.concatenate([cell[f"h{g}"]["kernel"] for g in "ifgo"], 1)  # [H, 4H]
+    return LstmWeights(
+        w_in=jnp.concatenate([w_x[:POSE_DIM], w_h], 0),
+        w_pressure=w_x[POSE_DIM:],
+        b_gate=jnp.concatenate([cell[f"h{g}"]["bias"] for g in "ifgo"]),
+        w_fc=p["fc"]["kernel"],
+        b_fc=p["fc"]["bias"],
+        w_out=p["out"]["kernel"],
+        b_out=p["out"]["bias"],
+    )
+
+
+def _make_stretched_lean(model: ForwardModel, k_max: int, unroll: int):
+    """As `_make_stretched`, with the LSTM written out and a hand-written backward pass.
+
+    Per period the forward runs one gate product [B, 6 + H] x [6 + H, 4H] (the pressure part,
+    constant over a command's k periods, is computed once per command), one fused gate update
+    and the two output layers, and stores the activations; the backward runs three products and
+    two fused updates per period, no recomputation. The per-command pressure gradients are
+    block sums of the per-period gate gradients (a cumulative sum, no scatter).
+    """
+    hidden = model.hidden
+
+    def sizes(pressure, k):
+        t = pressure.shape[1]
+        n = t * k
+        padded = -(-t * k_max // unroll) * unroll
+        return t, n, (n + unroll - 1) // unroll, padded
+
+    def cell(w: LstmWeights, c, h, pose, gate_p):
+        z = jnp.concatenate([pose, h], -1) @ w.w_in + gate_p
+        s_i, s_f, s_o = (jax.nn.sigmoid(z[:, j * hidden : (j + 1) * hidden]) for j in (0, 1, 3))
+        t_g = jnp.tanh(z[:, 2 * hidden : 3 * hidden])
+        c_new = s_f * c + s_i * t_g
+        tanh_c = jnp.tanh(c_new)
+        h_new = s_o * tanh_c
+        act = jnp.tanh(h_new @ w.w_fc + w.b_fc)
+        pose_new = act @ w.w_out + w.b_out
+        # What the backward needs: the input cell state and every activation.
+        saved = jnp.concatenate([c, s_i, s_f, t_g, s_o, tanh_c, act], -1)
+        return (c_new, h_new, pose_new), saved
+
+    def run(w: LstmWeights, pressure, pose0, k):
+        t, n, n_iter, padded = sizes(pressure, k)
+        b = pressure.shape[0]
+        gate_p = jnp.einsum("btp,pg->tbg", pressure, w.w_pressure) + w.b_gate  # [T, B, 4H]
+        zeros = jnp.zeros((b, hidden), pressure.dtype)
+        carry0 = (zeros, zeros, pose0)
+        width = 6 * hidden + w.w_fc.shape[1]
+        saved_buf = jnp.zeros((padded, b, width), pressure.dtype)
+        pose_buf = jnp.zeros((padded, b, POSE_DIM), pressure.dtype)
+
+        def body(state):
+            j, carry, saved_buf, pose_buf = state
+            saved_block, pose_block = [], []
+            for u in range(unroll):
+                i = j * unroll + u
+                new, saved = cell(w, *carry, gate_p[jnp.clip(i // k, 0, t - 1)])
+                carry = jax.tree.map(lambda a, b, i=i: jnp.where(i < n, a, b), new, carry)
+                saved_block.append(saved)
+                pose_block.append(carry[2])
+            saved_buf = jax.lax.dynamic_update_slice_in_dim(
+                saved_buf, jnp.stack(saved_block), j * unroll, 0
+            )
+            pose_buf = jax.lax.dynamic_update_slice_in_dim(
+                pose_buf, jnp.stack(pose_block), j * unroll, 0
+            )
+            return j + 1, carry, saved_buf, pose_buf
+
+        state = (0, carry0, saved_buf, pose_buf)
+        _, _, saved_buf, pose_buf = jax.lax.while_loop(lambda s: s[0] < n_iter, body, state)
+        poses = pose_buf[(jnp.arange(t) + 1) * k - 1]  # after period (t + 1) k - 1
+        return jnp.swapaxes(poses, 0, 1), saved_buf
+
+    @jax.custom_vjp
+    def stretched(w, pressure, pose0, k):
+        return run(w, pressure, pose0, k)[0]
+
+    def fwd(w, pressure, pose0, k):
+        poses, saved_buf = run(w, pressure, pose0, k)
+        return poses, (w, pressure, k, saved_buf)
+
+    def bwd(res, ct):
+        w, pressure, k, saved_buf = res
+        t, n, n_iter, padded = sizes(pressure, k)
+        b = pressure.shape[0]
+        # Cotangent of the pose after each period (non-zero where a command closes).
+        ct_buf = jnp.zeros((padded, b, POSE_DIM), ct.dtype)
+        ct_buf = ct_buf.at[(jnp.arange(t) + 1) * k - 1].set(jnp.swapaxes(ct, 0, 1))
+        w_in_t, w_fc_t, w_out_t = w.w_in.T, w.w_fc.T, w.w_out.T
+        h4 = 4 * hidden
+        zeros = jnp.zeros((b, hidden), ct.dtype)
+        d_gate_buf = jnp.zeros((padded, b, h4), ct.dtype)
+
+        def body(state):
+            j, (d_c, d_h, d_pose), d_gate_buf = state
+            block = jax.lax.dynamic_slice_in_dim(saved_buf, j * unroll, unroll, 0)
+            cts = jax.lax.dynamic_slice_in_dim(ct_buf, j * unroll, unroll, 0)
+            d_gates = [None] * unroll
+            for u in reversed(range(unroll)):
+                live = j * unroll + u < n
+                c, s_i, s_f, t_g, s_o, tanh_c = (
+                    block[u][:, m * hidden : (m + 1) * hidden] for m in range(6)
+                )
+                act = block[u][:, 6 * hidden :]
+                d_pose_new = d_pose + cts[u]
+                d_fc = (d_pose_new @ w_out_t) * (1.0 - act * act)
+                d_h_new = d_h + d_fc @ w_fc_t
+                d_c_new = d_c + d_h_new * s_o * (1.0 - tanh_c * tanh_c)
+                d_z = jnp.concatenate(
+                    [
+                        d_c_new * t_g * s_i * (1.0 - s_i),
+                        d_c_new * c * s_f * (1.0 - s_f),
+                        d_c_new * s_i * (1.0 - t_g * t_g),
+                        d_h_new * tanh_c * s_o * (1.0 - s_o),
+                    ],
+                    -1,
+                )
+                d_in = d_z @ w_in_t
+                new = (d_c_new * s_f, d_in[:, POSE_DIM:], d_in[:, :POSE_DIM])
+                d_c, d_h, d_pose = (
+                    jnp.where(live, a, old) for a, old in zip(new, (d_c, d_h, d_pose), strict=True)
+                )
+                d_gates[u] = jnp.where(live, d_z, 0.0)
+            d_gate_buf = jax.lax.dynamic_update_slice_in_dim(
+                d_gate_buf, jnp.stack(d_gates), j * unroll, 0
+            )
+            return j - 1, (d_c, d_h, d_pose), d_gate_buf
+
+        state = (n_iter - 1, (zeros, zeros, jnp.zeros_like(ct[:, 0])), d_gate_buf)
+        _, (_, _, d_pose0), d_gate_buf = jax.lax.while_loop(lambda s: s[0] >= 0, body, state)
+        # Sum each command's k periods: differences of a cumulative sum at the block ends.
+        csum = jnp.cumsum(d_gate_buf, 0)
+        ends = csum[(jnp.arange(t) + 1) * k - 1]
+        d_cmd = ends - jnp.concatenate([jnp.zeros_like(ends[:1]), ends[:-1]], 0)  # [T, B, 4H]
+        d_pressure = jnp.einsum("tbg,pg->btp", d_cmd, w.w_pressure)
+        return jax.tree.map(jnp.zeros_like, w), d_pressure, d_pose0, None
+
+    stretched.defvjp(fwd, bwd)
+
+    def apply(params, pressure, pose0, k):
+        return stretched(lstm_weights(params), pressure, pose0, k)
+
+    return apply
 
 
 class Generator(nn.Module):

@@ -35,6 +35,7 @@ from jax.sharding import PartitionSpec as P
 from ccgan import checkpoint, losses
 from ccgan.data import PRESSURE_DIM, PoseBounds, TranslationData
 from ccgan.forward import ForwardConfig
+from ccgan.fused_feedback import fused_weights, make_forward_stretched_fused
 from ccgan.models import (
     Critic,
     ForwardModel,
@@ -87,6 +88,9 @@ class TrainConfig:
     gen_unroll: int = 10
     #: F_c periods per loop iteration in the feedback rollout and the choice of k.
     feedback_unroll: int = 10
+    #: The feedback rollout: "lean" or "cell" (`models.forward_stretched` impls) or "pallas"
+    #: (two fused Triton kernels, `ccgan.fused_feedback`; GPU, slower there: bench/feedback.py).
+    feedback_impl: str = "lean"
     #: WCGAN-GP baseline: one generator and one critic on D_c only, no cycle/identity loss.
     baseline: bool = False
     #: Epochs between checkpoints (also the driver's jitted chunk and tqdm tick).
@@ -115,7 +119,9 @@ class TrainState:
     """Everything that changes during training.
 
     Attributes:
-      params: {"g_c", "c_c"} (+ {"g_s", "c_s"} unless baseline) Flax variables.
+      params: {"gen", "critic"}: Flax variables of each network type stacked on a leading axis,
+        [G_c, G_s] and [C_c, C_s] (length 1, G_c and C_c only, for the baseline), so that both
+        domains' networks run as one vmapped call (see `generator` / `critic_of`).
       opt_gen: AdamW state of the generators.
       opt_critic: AdamW state of the critics.
       k: current hold factor (int32 scalar).
@@ -127,6 +133,11 @@ class TrainState:
     opt_critic: Any
     k: jnp.ndarray
     epoch: jnp.ndarray
+
+
+def generator(params: dict, index: int):
+    """One generator's variables from `TrainState.params` (0: G_c, 1: G_s)."""
+    return jax.tree.map(lambda x: x[index], params["gen"])
 
 
 class Trainer(NamedTuple):
@@ -171,6 +182,29 @@ def _mesh_constraint(batch_size: int):
     return lambda x: jax.lax.with_sharding_constraint(x, sharding)
 
 
+FEEDBACK_IMPLS = ("cell", "lean", "pallas")
+
+
+def _feedback_rollout(config: TrainConfig, fwd: ForwardModel, forward_c_params):
+    """`(commands [B, L, 3], pose0 [B, 6], k) -> F_c poses [B, L, 6]`, held k periods each."""
+    if config.feedback_impl not in FEEDBACK_IMPLS:
+        raise ValueError(f"feedback_impl must be one of {FEEDBACK_IMPLS}: {config.feedback_impl!r}")
+    if config.feedback_impl == "pallas":
+        weights = fused_weights(forward_c_params)
+        fused = make_forward_stretched_fused(config.k_max, interpret=jax.default_backend() != "gpu")
+        return lambda commands, pose0, k: fused(weights, commands, pose0, k)
+    return lambda commands, pose0, k: forward_stretched(
+        fwd,
+        forward_c_params,
+        commands,
+        pose0,
+        k,
+        config.k_max,
+        config.feedback_unroll,
+        impl=config.feedback_impl,
+    )
+
+
 def make_trainer(
     config: TrainConfig,
     data: TranslationData,
@@ -195,6 +229,7 @@ def make_trainer(
     tx_critic = _optimizer(config.lr_critic, config)
     cycle = not config.baseline
     shard = _mesh_constraint(config.batch_size)
+    feedback_rollout = _feedback_rollout(config, fwd, forward_c_params)
 
     # The generator's input domain: D_s for CCGAN; D_c only for the WCGAN-GP baseline.
     src = data.constrained if config.baseline else data.source
@@ -227,7 +262,7 @@ def make_trainer(
         commands of every `val_window_length` window open loop from the window's recorded pose.
         All k run at once: one masked scan of l_val * k_max periods, vmapped over the choices.
         """
-        commands = to_windows(gen.apply(state.params["g_c"], val)[..., :PRESSURE_DIM])
+        commands = to_windows(gen.apply(generator(state.params, 0), val)[..., :PRESSURE_DIM])
         target = to_windows(val[..., PRESSURE_DIM:])
         pose0 = to_windows(val_prev)[:, 0]
 
@@ -254,12 +289,8 @@ def make_trainer(
         critics = jax.vmap(critic.init, in_axes=(0, None))(
             jax.random.split(k_critic, n_nets), x_c[:1]
         )
-        pick = lambda tree, i: jax.tree.map(lambda a: a[i], tree)  # noqa: E731
-        params = {"g_c": pick(gens, 0), "c_c": pick(critics, 0)}
-        if cycle:
-            params["g_s"], params["c_s"] = pick(gens, 1), pick(critics, 1)
-        gp = {n: params[n] for n in params if n.startswith("g_")}
-        cp = {n: params[n] for n in params if n.startswith("c_")}
+        params = {"gen": gens, "critic": critics}
+        gp, cp = params["gen"], params["critic"]
         state = TrainState(
             params=params,
             opt_gen=tx_gen.init(gp),
@@ -270,14 +301,15 @@ def make_trainer(
         # Like the authors' code, pick k once before training, with the untrained generator.
         return choose_k(state)[0]
 
-    def both_halves(fn, params, a, b):
-        """fn(params, concat(a, b)) split back into its two halves (one traced call, not two)."""
-        out = fn(params, jnp.concatenate([a, b], 0))
-        return out[: a.shape[0]], out[a.shape[0] :]
+    # Both domains' networks of a type run as one call vmapped over the stacked parameters
+    # (index 0: G_c / C_c, 1: G_s / C_s): half the sequential kernels of two separate calls.
+    gen_pair = jax.vmap(gen.apply)
+    critic_pair = jax.vmap(critic.apply)
 
     def critic_terms(params, real, fake, key):
         """Wasserstein loss and gradient penalty of one critic on real/fake [B, L, 9]."""
-        real_score, fake_score = both_halves(critic.apply, params, real, fake)
+        scores = critic.apply(params, jnp.concatenate([real, fake], 0))
+        real_score, fake_score = scores[: real.shape[0]], scores[real.shape[0] :]
         score = lambda x: critic.apply(params, x)  # noqa: E731
         return (
             losses.critic_loss(real_score, fake_score),
@@ -285,40 +317,36 @@ def make_trainer(
         )
 
     def critic_losses(cparams, gparams, xs, xc, key):
-        k_c, k_s = jax.random.split(key)
-        fake_c = jax.lax.stop_gradient(gen.apply(gparams["g_c"], xs))
-        out = {}
-        out["critic_c"], out["gp_c"] = critic_terms(cparams["c_c"], xc, fake_c, k_c)
-        total = out["critic_c"] + config.lambda_gp * out["gp_c"]
+        # Real and generated samples per critic: C_c judges D_c, C_s judges D_s.
+        gen_in, real = (jnp.stack([xs, xc]), jnp.stack([xc, xs])) if cycle else (xs[None], xc[None])
+        fake = jax.lax.stop_gradient(gen_pair(gparams, gen_in))
+        keys = jax.random.split(key, real.shape[0])
+        wass, gp = jax.vmap(critic_terms)(cparams, real, fake, keys)
+        out = {"critic_c": wass[0], "gp_c": gp[0]}
         if cycle:
-            fake_s = jax.lax.stop_gradient(gen.apply(gparams["g_s"], xc))
-            out["critic_s"], out["gp_s"] = critic_terms(cparams["c_s"], xs, fake_s, k_s)
-            total = total + out["critic_s"] + config.lambda_gp * out["gp_s"]
+            out.update(critic_s=wass[1], gp_s=gp[1])
+        total = jnp.sum(wass) + config.lambda_gp * jnp.sum(gp)
         out["critic_total"] = total
         return total, out
 
     def generator_losses(gparams, cparams, xs, prev_s, xc, k):
+        b = xs.shape[0]
         if cycle:
-            # G_c on D_s (translation) and on D_c (identity); G_s likewise.
-            fake_c, same_c = both_halves(gen.apply, gparams["g_c"], xs, xc)
-            fake_s, same_s = both_halves(gen.apply, gparams["g_s"], xc, xs)
-            back_s = gen.apply(gparams["g_s"], fake_c)
-            back_c = gen.apply(gparams["g_c"], fake_s)
+            # G_c on D_s (translation) and D_c (identity); G_s on D_c and D_s; one call.
+            first = gen_pair(
+                gparams, jnp.stack([jnp.concatenate([xs, xc]), jnp.concatenate([xc, xs])])
+            )
+            fake_c, same_c, fake_s, same_s = first[0, :b], first[0, b:], first[1, :b], first[1, b:]
+            # Back again: G_c(fake_s) and G_s(fake_c).
+            back_c, back_s = gen_pair(gparams, jnp.stack([fake_s, fake_c]))
+            scores = critic_pair(cparams, jnp.stack([fake_c, fake_s]))
         else:
-            fake_c = gen.apply(gparams["g_c"], xs)
-        adv = losses.generator_adversarial_loss(critic.apply(cparams["c_c"], fake_c))
-        pred = forward_stretched(
-            fwd,
-            forward_c_params,
-            fake_c[..., :PRESSURE_DIM],
-            prev_s[:, 0],
-            k,
-            config.k_max,
-            config.feedback_unroll,
-        )
+            fake_c = gen_pair(gparams, xs[None])[0]
+            scores = critic_pair(cparams, fake_c[None])
+        adv = sum(losses.generator_adversarial_loss(s) for s in scores)
+        pred = feedback_rollout(fake_c[..., :PRESSURE_DIM], prev_s[:, 0], k)
         out = {"feedback": losses.feedback_loss(pred, xs[..., PRESSURE_DIM:])}
         if cycle:
-            adv = adv + losses.generator_adversarial_loss(critic.apply(cparams["c_s"], fake_s))
             out["cycle"] = losses.cycle_loss(back_s, xs) + losses.cycle_loss(back_c, xc)
             out["identity"] = losses.identity_loss(same_s, xs) + losses.identity_loss(same_c, xc)
         out["adversarial"] = adv
@@ -333,8 +361,7 @@ def make_trainer(
         """One critic update then one generator update; inputs = (idx_in [B], idx_c [B], key)."""
         idx_in, idx_c, key = inputs
         xs, prev_s, xc = shard(x_in[idx_in]), shard(prev_in[idx_in]), shard(x_c[idx_c])
-        gp = {n: state.params[n] for n in state.params if n.startswith("g_")}
-        cp = {n: state.params[n] for n in state.params if n.startswith("c_")}
+        gp, cp = state.params["gen"], state.params["critic"]
 
         (_, c_out), c_grads = jax.value_and_grad(critic_losses, has_aux=True)(cp, gp, xs, xc, key)
         c_updates, opt_critic = tx_critic.update(c_grads, state.opt_critic, cp)
@@ -346,7 +373,9 @@ def make_trainer(
         g_updates, opt_gen = tx_gen.update(g_grads, state.opt_gen, gp)
         gp = optax.apply_updates(gp, g_updates)
 
-        state = state.replace(params={**gp, **cp}, opt_gen=opt_gen, opt_critic=opt_critic)
+        state = state.replace(
+            params={"gen": gp, "critic": cp}, opt_gen=opt_gen, opt_critic=opt_critic
+        )
         return state, {**c_out, **g_out}
 
     def epoch_fn(state: TrainState, epoch, key):
@@ -507,7 +536,7 @@ def train_and_evaluate(
             for name in names:
                 save_translator(
                     workdir / name,
-                    one.params["g_c"],
+                    generator(one.params, 0),
                     int(one.k),
                     data.bounds,
                     config,

@@ -330,10 +330,12 @@ def test_baseline_and_vmapped_make_train(tiny_setup):
     config = dataclasses.replace(TINY, baseline=True, epochs=2)
     train = train_lib.make_train(config, data, fparams, fconf.model)
     state, metrics = jax.jit(jax.vmap(train))(jax.random.split(jax.random.PRNGKey(0), 2))
-    assert set(state.params) == {"g_c", "c_c"}
+    assert set(state.params) == {"gen", "critic"}
+    # One generator and one critic (G_c, C_c) per seed: a stack of length 1.
+    assert {x.shape[:2] for x in jax.tree.leaves(state.params)} == {(2, 1)}
     assert metrics["generator_total"].shape == (2, 2)
     assert np.isfinite(metrics["feedback"]).all() and np.isfinite(metrics["critic_c"]).all()
     assert np.isnan(metrics["cycle"]).all()  # no cycle loss in the baseline
     # Two seeds give two different generators.
-    g = state.params["g_c"]["params"]["out"]["kernel"]
+    g = state.params["gen"]["params"]["out"]["kernel"][:, 0]
     assert not np.array_equal(g[0], g[1])
