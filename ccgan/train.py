@@ -87,7 +87,7 @@ class TrainConfig:
     #: LSTM time steps per loop iteration in the generators (numerics unchanged).
     gen_unroll: int = 10
     #: F_c periods per loop iteration in the feedback rollout and the choice of k.
-    feedback_unroll: int = 10
+    feedback_unroll: int = 25
     #: The feedback rollout: "lean" or "cell" (`models.forward_stretched` impls) or "pallas"
     #: (two fused Triton kernels, `ccgan.fused_feedback`; GPU, slower there: bench/feedback.py).
     feedback_impl: str = "lean"
@@ -511,9 +511,9 @@ def train_and_evaluate(
     if max_chunks is not None:
         starts = starts[:max_chunks]
     bar = tqdm(total=config.epochs, initial=done, unit="epoch", disable=not progress, desc="ccgan")
-    for start in starts:
-        n = min(chunk, config.epochs - start)
-        state, metrics = run(state, run_keys, jnp.int32(start), n)
+
+    def record(start, n, state, metrics):
+        """Host side of a finished chunk: CSV rows, checkpoint, progress bar."""
         metrics = jax.device_get(metrics)
         for s_i, seed in enumerate(seeds):
             for e in range(n):
@@ -522,9 +522,20 @@ def train_and_evaluate(
                 rows.append(row)
         checkpoint.save(ckpt_path, jax.device_get(state), meta | {"epoch": start + n})
         _write_csv(csv_path, rows)
-        last = {m: float(np.nanmean(metrics[m][:, -1])) for m in ("generator_total", "k")}
-        bar.set_postfix(last)
+        bar.set_postfix({m: float(np.nanmean(metrics[m][:, -1])) for m in ("generator_total", "k")})
         bar.update(n)
+
+    # The next chunk is dispatched before the last one's files are written, so the device keeps
+    # working while the host saves (JAX dispatch is asynchronous; the arrays are immutable).
+    pending = None
+    for start in starts:
+        n = min(chunk, config.epochs - start)
+        state, metrics = run(state, run_keys, jnp.int32(start), n)
+        if pending is not None:
+            record(*pending)
+        pending = (start, n, state, metrics)
+    if pending is not None:
+        record(*pending)
     bar.close()
 
     if int(np.asarray(state.epoch)[0]) >= config.epochs:
