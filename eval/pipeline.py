@@ -169,20 +169,27 @@ def choose_stretch_k(arm_s, arm_c, cfg: EvalConfig) -> tuple[int, dict[int, floa
 
 
 class Translator:
-    """A loaded translator method: `translate(p_s [T, 3], poses_s [T, 6], seed)`."""
+    """A loaded translator method: `translate(p_s [T, 3], poses_s [T, 6], seed)`.
 
-    def __init__(self, name: str, obj):
+    With `trained_seeds` ({seed: translator}, several independently trained models) the seed
+    picks the model, so a method's mean ± std spans training seeds.
+    """
+
+    def __init__(self, name: str, obj, trained_seeds: dict | None = None):
         self.name = name
         self._obj = obj
+        self.trained_seeds = trained_seeds or {}
         try:
             params = inspect.signature(obj.translate).parameters
         except (TypeError, ValueError):
             params = {}
-        self.takes_seed = "seed" in params
+        self.takes_seed = "seed" in params or bool(self.trained_seeds)
 
     def translate(self, pressures_s: np.ndarray, poses_s: np.ndarray, seed: int):
         """Returns (D_c commands [T * k, 3] bar, k)."""
-        if self.takes_seed:
+        if self.trained_seeds:
+            out = self.trained_seeds[seed].translate(pressures_s, poses_s)
+        elif self.takes_seed:
             out = self._obj.translate(pressures_s, poses_s, seed=seed)
         else:
             out = self._obj.translate(pressures_s, poses_s)
@@ -206,13 +213,17 @@ def load_translator(method: str, cfg: EvalConfig) -> tuple[Translator | None, st
     loader = getattr(ccgan, "load_translator", None)
     if loader is None:
         return None, "ccgan.load_translator does not exist (yet)"
+    path = None
     try:
         if method == "ccgan":
-            obj = loader(path=cfg.ccgan_path)
+            path = cfg.ccgan_path
+            obj = loader(path=path)
         elif cfg.wcgan_path is not None:
-            obj = loader(path=cfg.wcgan_path)
+            path = cfg.wcgan_path
+            obj = loader(path=path)
         elif WCGAN_DEFAULT_PATH.exists():
-            obj = loader(path=WCGAN_DEFAULT_PATH)
+            path = WCGAN_DEFAULT_PATH
+            obj = loader(path=path)
         else:
             try:
                 obj = loader(path=None, kind="wcgan")
@@ -222,6 +233,14 @@ def load_translator(method: str, cfg: EvalConfig) -> tuple[Translator | None, st
         return None, f"no trained {method} translator ({type(err).__name__}: {err})"
     if obj is None:
         return None, f"no trained {method} translator"
+    # Separately trained seeds beside the checkpoint (`ccgan.train --seeds 0 1 2` writes
+    # translator_seed{s}.ckpt): used when there is one for every evaluation seed.
+    folder = Path(path).parent if path is not None else None
+    if folder is not None and len(cfg.seeds) > 1:
+        files = {s: folder / f"translator_seed{s}.ckpt" for s in cfg.seeds}
+        if all(f.exists() for f in files.values()):
+            seeds = {s: loader(path=f) for s, f in files.items()}
+            return Translator(method, obj, seeds), f"loaded, trained seeds {list(cfg.seeds)}"
     return Translator(method, obj), "loaded"
 
 
@@ -350,6 +369,13 @@ def evaluate(cfg: EvalConfig, command: str = "", log=print) -> dict:
                 log("NOTE: " + note)
             else:
                 translators[method] = tr
+                if tr.trained_seeds:
+                    note = (
+                        f"{method.upper()}: one separately trained model per seed "
+                        f"{sorted(tr.trained_seeds)}; its ± spans training seeds."
+                    )
+                    notes.append(note)
+                    log("NOTE: " + note)
     run_oracle = "oracle" in cfg.methods
     if run_oracle and jax.default_backend() == "cpu" and cfg.xml is None and cfg.oracle.steps > 0:
         if cfg.oracle.horizon_s is None or cfg.oracle.horizon_s > 5.0:
@@ -573,7 +599,8 @@ def markdown_report(results: dict) -> str:
     lines += [
         "",
         "X_err (cm) / phi_err (rad), mean ± std over all samples (and seeds, where a method is"
-        " stochastic). k = control periods per source step. Paper Table I (CCGAN-GP, through F_c):"
+        " stochastic or has one trained model per seed). k = control periods per source step."
+        " Paper Table I (CCGAN-GP, through F_c):"
         " circle 2.98/0.276, rectangle 1.56/0.126, damped circle 1.19/0.101, ellipse 1.56/0.126,"
         " kite 2.37/0.19.",
         "",

@@ -100,27 +100,65 @@ def test_stretched_forward_equals_masked_reference_values_and_gradients():
     def loss(fn, k, **kw):
         return lambda p, x0: jnp.sum(weights * fn(fwd, fp, p, x0, k, 5, **kw))
 
-    # unroll=3 does not divide T * k: the last iteration of the loop is partly masked.
-    for k in (2, 5):
-        new = models.forward_stretched(fwd, fp, p, pose0, k, 5, unroll=3)
-        ref = models.forward_stretched_masked(fwd, fp, p, pose0, k, 5)
-        np.testing.assert_allclose(new, ref, rtol=1e-5, atol=1e-6)
-        g_new = jax.grad(loss(models.forward_stretched, k, unroll=3), (0, 1))(p, pose0)
-        g_ref = jax.grad(loss(models.forward_stretched_masked, k), (0, 1))(p, pose0)
+    for impl in ("cell", "lean"):
+        # unroll=3 does not divide T * k: the last iteration of the loop is partly masked.
+        for k in (2, 5):
+            new = models.forward_stretched(fwd, fp, p, pose0, k, 5, unroll=3, impl=impl)
+            ref = models.forward_stretched_masked(fwd, fp, p, pose0, k, 5)
+            np.testing.assert_allclose(new, ref, rtol=1e-5, atol=1e-6)
+            g_new = jax.grad(loss(models.forward_stretched, k, unroll=3, impl=impl), (0, 1))(
+                p, pose0
+            )
+            g_ref = jax.grad(loss(models.forward_stretched_masked, k), (0, 1))(p, pose0)
+            for a, b in zip(g_new, g_ref, strict=True):
+                np.testing.assert_allclose(a, b, rtol=1e-5, atol=1e-6)
+
+        # Vmapped over k (seeds with different k): the loop runs to the largest k, masked per k.
+        ks = jnp.array([2, 5])
+        grad_new = jax.vmap(
+            lambda k, impl=impl: jax.grad(loss(models.forward_stretched, k, unroll=4, impl=impl))(
+                p, pose0
+            )
+        )
+        grad_ref = jax.vmap(lambda k: jax.grad(loss(models.forward_stretched_masked, k))(p, pose0))
+        np.testing.assert_allclose(grad_new(ks), grad_ref(ks), rtol=1e-5, atol=1e-6)
+
+        # One compilation serves every k.
+        jitted = jax.jit(
+            lambda k, impl=impl: models.forward_stretched(fwd, fp, p, pose0, k, 5, impl=impl)
+        )
+        for k in (1, 2, 5):
+            jitted(jnp.int32(k))
+        assert jitted._cache_size() == 1
+
+
+def test_fused_pallas_rollout_matches_in_the_interpreter():
+    """The two Triton kernels (run by the Pallas interpreter on CPU) against the masked scan."""
+    from ccgan import fused_feedback
+
+    fwd = models.ForwardModel(hidden=16, fc=5)  # the kernels need a width 2^n >= 16
+    p = jax.random.uniform(jax.random.PRNGKey(1), (3, 3, 3))
+    pose0 = jax.random.uniform(jax.random.PRNGKey(2), (3, 6))
+    fp = fwd.init(jax.random.PRNGKey(0), pose0[:, None], p[:, :1])
+    weights = jax.random.normal(jax.random.PRNGKey(3), (3, 3, 6))
+    fused = fused_feedback.make_forward_stretched_fused(3, interpret=True)
+    w = fused_feedback.fused_weights(fp)
+    for k in (1, 3):
+        ref = models.forward_stretched_masked(fwd, fp, p, pose0, k, 3)
+        np.testing.assert_allclose(fused(w, p, pose0, jnp.int32(k)), ref, rtol=1e-5, atol=1e-6)
+        g_new = jax.grad(lambda p, x0, k=k: jnp.sum(weights * fused(w, p, x0, k)), (0, 1))(p, pose0)
+        g_ref = jax.grad(
+            lambda p, x0, k=k: jnp.sum(
+                weights * models.forward_stretched_masked(fwd, fp, p, x0, k, 3)
+            ),
+            (0, 1),
+        )(p, pose0)
         for a, b in zip(g_new, g_ref, strict=True):
             np.testing.assert_allclose(a, b, rtol=1e-5, atol=1e-6)
-
-    # Vmapped over k (seeds with different k): the loop runs to the largest k, masked per k.
-    ks = jnp.array([2, 5])
-    grad_new = jax.vmap(lambda k: jax.grad(loss(models.forward_stretched, k, unroll=4))(p, pose0))
-    grad_ref = jax.vmap(lambda k: jax.grad(loss(models.forward_stretched_masked, k))(p, pose0))
-    np.testing.assert_allclose(grad_new(ks), grad_ref(ks), rtol=1e-5, atol=1e-6)
-
-    # One compilation serves every k.
-    jitted = jax.jit(lambda k: models.forward_stretched(fwd, fp, p, pose0, k, 5))
-    for k in (1, 2, 5):
-        jitted(jnp.int32(k))
-    assert jitted._cache_size() == 1
+    with pytest.raises(ValueError, match="width"):
+        fused_feedback.fused_weights(
+            models.ForwardModel(hidden=8).init(jax.random.PRNGKey(0), pose0[:, None], p[:, :1])
+        )
 
 
 # ----------------------------------------------------------------------------- losses

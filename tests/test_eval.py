@@ -2,6 +2,7 @@
 
 import dataclasses
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -163,3 +164,21 @@ def test_tiny_end_to_end(small_xml, tmp_path):
     assert w == 3 * 128 and h == 96
     assert first.std() > 5.0  # not a blank frame
     assert (tmp_path / "shape_circle.png").exists()
+
+
+def test_translator_per_trained_seed(tmp_path):
+    """translator_seed{s}.ckpt beside the checkpoint: one trained model per evaluation seed."""
+    import shutil
+
+    shipped = Path(__file__).resolve().parent.parent / "results" / "ccgan" / "translator.ckpt"
+    for name in ("translator.ckpt", "translator_seed0.ckpt", "translator_seed1.ckpt"):
+        shutil.copy(shipped, tmp_path / name)
+    path = str(tmp_path / "translator.ckpt")
+    two = pipeline.load_translator("ccgan", pipeline.EvalConfig(seeds=(0, 1), ccgan_path=path))[0]
+    assert sorted(two.trained_seeds) == [0, 1] and two.takes_seed
+    p_s = np.full((4, 3), 1.0)
+    commands, k = two.translate(p_s, np.zeros((4, 6)), seed=1)
+    assert commands.shape == (4 * k, 3)
+    # A seed without its own model: the single checkpoint serves every seed.
+    three = pipeline.load_translator("ccgan", pipeline.EvalConfig(seeds=(0, 1, 2), ccgan_path=path))
+    assert three[0].trained_seeds == {}
