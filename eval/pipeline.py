@@ -506,7 +506,11 @@ def evaluate(cfg: EvalConfig, command: str = "", log=print) -> dict:
                     keep[std] = poses[0]
                 noise[shape][method] = res
                 traj.setdefault("noise", {})[method] = keep
-                cmds = [commands_for(method, p_s, target, seed)[0] for seed in range(cfg.n_repeats)]
+                # Repetitions of one translator: a sampling translator draws seeds 0..R-1; one
+                # with a model per training seed repeats the first seed's model.
+                trained = method in translators and translators[method].trained_seeds
+                rep_seeds = [cfg.seeds[0]] * cfg.n_repeats if trained else range(cfg.n_repeats)
+                cmds = [commands_for(method, p_s, target, seed)[0] for seed in rep_seeds]
                 k = traj["k"][method]
                 reps = run_dc(arm_c, np.stack(cmds), k, cfg.backend)
                 spread = metrics.repetition_spread_cm(reps)

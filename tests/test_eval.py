@@ -116,10 +116,19 @@ def test_replay_matches_rollout(small_xml):
 
 
 def test_tiny_end_to_end(small_xml, tmp_path):
+    import shutil
+
+    # A WCGAN-GP stand-in with one model per training seed (copies of the shipped translator),
+    # so the per-seed path runs through the table, the noise and the periodicity tests.
+    shipped = Path(__file__).resolve().parent.parent / "results" / "ccgan" / "translator.ckpt"
+    (tmp_path / "wcgan").mkdir()
+    for name in ("translator.ckpt", "translator_seed0.ckpt", "translator_seed1.ckpt"):
+        shutil.copy(shipped, tmp_path / "wcgan" / name)
     cfg = pipeline.EvalConfig(
         shapes=("circle",),
         methods=("none", "stretch", "ccgan", "wcgan"),
-        seeds=(0,),
+        seeds=(0, 1),
+        wcgan_path=str(tmp_path / "wcgan" / "translator.ckpt"),
         duration_s=2.0,
         stretch_candidates=(1, 2),
         validation_duration_s=1.0,
@@ -153,6 +162,9 @@ def test_tiny_end_to_end(small_xml, tmp_path):
         assert "forward model F_c" in md
     spread = data["periodicity"]["circle"]["stretch"]["spread_cm_max"]
     assert spread < 1e-9  # deterministic simulator and method: identical repetitions
+    # Two trained WCGAN-GP models (identical copies here); repetitions use one model.
+    assert data["table"]["circle"]["wcgan"]["n_seeds"] == 2
+    assert data["periodicity"]["circle"]["wcgan"]["spread_cm_max"] < 1e-9
     video = tmp_path / "video_circle.mp4"
     assert video.exists() and video.stat().st_size > 0
     import imageio_ffmpeg
