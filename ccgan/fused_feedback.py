@@ -1,12 +1,16 @@
-"""F_c's time-stretched open-loop rollout as two fused Pallas (Triton) GPU kernels.
+"""F_c's time-stretched open-loop rollout as two fused Pallas (Triton) GPU kernels (an option).
 
 The feedback loss runs the frozen forward model F_c for T * k control periods one after another
 (`ccgan.models.forward_stretched`). Each period is a handful of tiny matrix products (batch 10,
-hidden 64), so on a GPU the XLA version is bound by kernel launches, not arithmetic: ~10 launches
-per period forward and ~20 backward. Here the whole rollout is one kernel and its backward pass
-another: the LSTM carry stays in registers, every weight is read from L2, and the loop over
-periods runs on the GPU. Same function and gradients as `forward_stretched` (tested in the
+hidden 64), so on a GPU the XLA loop is bound by kernel launches, not arithmetic. Here the whole
+rollout is one kernel and its backward pass another: the LSTM carry stays on chip and the loop
+over periods runs on the GPU. Same function and gradients as `forward_stretched` (tested in the
 Pallas interpreter on CPU).
+
+Measured on an H200 (`bench/results/h200/feedback_pallas.md`), these kernels are 1.2-2.3x
+*slower* than the XLA loop (about 40-50 us per period forward + backward, for every warp count
+tried), so training uses the XLA "lean" rollout; `TrainConfig(feedback_impl="pallas")` selects
+this one.
 
 Layout: one Triton program per rollout (vmapping over seeds adds programs that run side by side).
 Triton wants every in-kernel array to be a power of two of at least 16 per dimension, so the

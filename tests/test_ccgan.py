@@ -6,6 +6,7 @@ and one XLA compilation cache, so the three driver runs of the resume test compi
 
 import dataclasses
 import math
+import os
 
 import jax
 import jax.numpy as jnp
@@ -377,3 +378,42 @@ def test_baseline_and_vmapped_make_train(tiny_setup):
     # Two seeds give two different generators.
     g = state.params["gen"]["params"]["out"]["kernel"][:, 0]
     assert not np.array_equal(g[0], g[1])
+
+
+def test_two_devices_train_like_one(tiny_setup, tmp_path):
+    """Two fake CPU devices (a fresh process): the batch is split over both, same parameters."""
+    import pickle
+    import subprocess
+    import sys
+
+    data, fconf, fparams, _, _ = tiny_setup
+    config = dataclasses.replace(TINY, epochs=2)
+    (tmp_path / "setup.pkl").write_bytes(pickle.dumps((data, fconf, jax.device_get(fparams))))
+    code = f"""
+import dataclasses, pickle, numpy as np
+import mjx_arm, jax
+from ccgan import train as train_lib
+assert len(jax.devices()) == 2
+data, fconf, fparams = pickle.loads(open({str(tmp_path / "setup.pkl")!r}, "rb").read())
+config = train_lib.TrainConfig(**{config.to_dict()!r})
+config = dataclasses.replace(config, **{{f: tuple(getattr(config, f)) for f in
+    ("stretch_choices", "critic_features")}})
+train = train_lib.make_train(config, data, fparams, fconf.model)
+_, metrics = jax.jit(train)(jax.random.PRNGKey(0))
+np.savez({str(tmp_path / "two.npz")!r}, **jax.device_get(metrics))
+print("ok")
+"""
+    env = dict(os.environ, XLA_FLAGS="--xla_force_host_platform_device_count=2")
+    out = subprocess.run(
+        [sys.executable, "-c", code], env=env, capture_output=True, text=True, timeout=600
+    )
+    assert out.returncode == 0 and out.stdout.strip().endswith("ok"), out.stderr[-3000:]
+    _, metrics = jax.jit(train_lib.make_train(config, data, fparams, fconf.model))(
+        jax.random.PRNGKey(0)
+    )
+    # Every loss term of every epoch agrees (the parameters themselves may not, bit for bit:
+    # Adam's first steps are ~lr * sign(gradient), and a near-zero gradient's sign follows the
+    # summation order).
+    with np.load(tmp_path / "two.npz") as two:
+        for name in ("critic_total", "generator_total", "feedback", "cycle", "identity"):
+            np.testing.assert_allclose(metrics[name], two[name], rtol=2e-3, atol=1e-6)
