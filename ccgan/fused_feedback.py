@@ -30,8 +30,8 @@ import jax
 import jax.numpy as jnp
 from jax.experimental import pallas as pl
 
-POSE_DIM = 6
-PRESSURE_DIM = 3
+from ccgan.models import POSE_DIM, lstm_weights
+
 #: Pose features padded to Triton's smallest matrix-product size.
 _POSE_PAD = 16
 _N_GATES = 4  # i, f, g, o (Flax's LSTM gate order)
@@ -65,24 +65,26 @@ def fused_weights(params) -> FusedWeights:
     Raises:
       ValueError: the LSTM width is not a power of two >= 16 (use the XLA rollout then).
     """
-    p = params["params"]
-    cell = next(v for v in p.values() if isinstance(v, dict) and "hi" in v)
-    hidden = cell["hi"]["kernel"].shape[0]
+    w = lstm_weights(params)
+    hidden = w.w_fc.shape[0]
     if hidden != _padded(hidden):
         raise ValueError(f"fused F_c rollout needs an LSTM width 2^n >= 16, got {hidden}")
-    w_in = jnp.stack([cell[f"i{g}"]["kernel"] for g in "ifgo"])  # [4, 9, H]: pose then pressure
-    w_pose = jnp.pad(w_in[:, :POSE_DIM], ((0, 0), (0, _POSE_PAD - POSE_DIM), (0, 0)))
-    fc = p["fc"]["kernel"].shape[1]
+
+    def per_gate(m):  # [rows, 4H] -> [4, rows, H]
+        return jnp.moveaxis(m.reshape(m.shape[0], _N_GATES, hidden), 1, 0)
+
+    fc = w.w_fc.shape[1]
     pad_fc = _padded(fc) - fc
+    pad_pose = _POSE_PAD - POSE_DIM
     return FusedWeights(
-        w_pose=w_pose,
-        w_hidden=jnp.stack([cell[f"h{g}"]["kernel"] for g in "ifgo"]),
-        w_pressure=w_in[:, POSE_DIM:],
-        b_gate=jnp.stack([cell[f"h{g}"]["bias"] for g in "ifgo"])[:, None],
-        w_fc=jnp.pad(p["fc"]["kernel"], ((0, 0), (0, pad_fc))),
-        b_fc=jnp.pad(p["fc"]["bias"], (0, pad_fc))[None],
-        w_out=jnp.pad(p["out"]["kernel"], ((0, pad_fc), (0, _POSE_PAD - POSE_DIM))),
-        b_out=jnp.pad(p["out"]["bias"], (0, _POSE_PAD - POSE_DIM))[None],
+        w_pose=jnp.pad(per_gate(w.w_in[:POSE_DIM]), ((0, 0), (0, pad_pose), (0, 0))),
+        w_hidden=per_gate(w.w_in[POSE_DIM:]),
+        w_pressure=per_gate(w.w_pressure),
+        b_gate=per_gate(w.b_gate[None]),
+        w_fc=jnp.pad(w.w_fc, ((0, 0), (0, pad_fc))),
+        b_fc=jnp.pad(w.b_fc, (0, pad_fc))[None],
+        w_out=jnp.pad(w.w_out, ((0, pad_fc), (0, pad_pose))),
+        b_out=jnp.pad(w.b_out, (0, pad_pose))[None],
     )
 
 

@@ -6,6 +6,7 @@ in [0, 1]. Sequences are batch-major, `[B, T, features]`.
 
 from __future__ import annotations
 
+import functools
 from typing import NamedTuple
 
 import flax.linen as nn
@@ -155,17 +156,21 @@ def forward_stretched(
     return fn(jax.lax.stop_gradient(params), pressure, pose0, jnp.asarray(k, jnp.int32))
 
 
+def _loop_sizes(pressure, k, k_max: int, unroll: int):
+    """(T, live periods T k, loop iterations, static buffer length in whole iterations)."""
+    t = pressure.shape[1]
+    n = t * k
+    padded = -(-t * k_max // unroll) * unroll
+    return t, n, (n + unroll - 1) // unroll, padded
+
+
 def _make_stretched(model: ForwardModel, k_max: int, unroll: int):
     """The custom-VJP function (params, pressure [B, T, 3], pose0 [B, 6], k) -> poses [B, T, 6]."""
 
     def period(params, carry, p):
         return _period(model, params, carry, p)
 
-    def sizes(pressure, k):
-        t = pressure.shape[1]
-        n = t * k  # live periods
-        padded = -(-t * k_max // unroll) * unroll  # static buffer length, whole iterations
-        return t, n, (n + unroll - 1) // unroll, padded
+    sizes = functools.partial(_loop_sizes, k_max=k_max, unroll=unroll)
 
     def run(params, pressure, pose0, k):
         """Forward loop; returns the poses and the carries [n_pad + 1, ...] (index i = before i)."""
@@ -284,11 +289,7 @@ def _make_stretched_lean(model: ForwardModel, k_max: int, unroll: int):
     """
     hidden = model.hidden
 
-    def sizes(pressure, k):
-        t = pressure.shape[1]
-        n = t * k
-        padded = -(-t * k_max // unroll) * unroll
-        return t, n, (n + unroll - 1) // unroll, padded
+    sizes = functools.partial(_loop_sizes, k_max=k_max, unroll=unroll)
 
     def cell(w: LstmWeights, c, h, pose, gate_p):
         z = jnp.concatenate([pose, h], -1) @ w.w_in + gate_p
