@@ -121,7 +121,7 @@ class TrainState:
     Attributes:
       params: {"gen", "critic"}: Flax variables of each network type stacked on a leading axis,
         [G_c, G_s] and [C_c, C_s] (length 1, G_c and C_c only, for the baseline), so that both
-        domains' networks run as one vmapped call (see `generator` / `critic_of`).
+        domains' networks run as one vmapped call (`generator(params, i)` picks one).
       opt_gen: AdamW state of the generators.
       opt_critic: AdamW state of the critics.
       k: current hold factor (int32 scalar).
