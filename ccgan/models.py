@@ -146,13 +146,21 @@ def forward_stretched(
       unroll: periods per loop iteration (fewer, longer iterations; numerics unchanged).
       impl: "cell" (the Flax cell, backward by `jax.vjp` of each period) or "lean" (the LSTM
         written out with the gate matrices fused, activations stored by the forward loop and
-        a hand-written backward: fewer, larger kernels per period).
+        a hand-written backward: fewer, larger kernels per period) or "lean_reduce" (as
+        "lean", each small matrix product written as a broadcast multiply and a sum, which XLA
+        can fuse with the elementwise work around it).
 
     Returns:
       [B, T, 6] normalised poses after each command's k-th period.
     """
-    make = {"cell": _make_stretched, "lean": _make_stretched_lean}[impl]
-    fn = make(model, k_max, unroll)
+    makers = {
+        "cell": _make_stretched,
+        "lean": _make_stretched_lean,
+        "lean_reduce": functools.partial(_make_stretched_lean, matmul=_multiply_sum),
+    }
+    if impl not in makers:
+        raise ValueError(f"impl must be one of {tuple(makers)}: {impl!r}")
+    fn = makers[impl](model, k_max, unroll)
     return fn(jax.lax.stop_gradient(params), pressure, pose0, jnp.asarray(k, jnp.int32))
 
 
@@ -278,28 +286,34 @@ def lstm_weights(params) -> LstmWeights:
     )
 
 
-def _make_stretched_lean(model: ForwardModel, k_max: int, unroll: int):
+def _multiply_sum(x, w):
+    """x [..., M] @ w [M, N] as a broadcast product and a sum over M (a fusible reduction)."""
+    return jnp.sum(x[..., :, None] * w, axis=-2)
+
+
+def _make_stretched_lean(model: ForwardModel, k_max: int, unroll: int, matmul=jnp.matmul):
     """As `_make_stretched`, with the LSTM written out and a hand-written backward pass.
 
     Per period the forward runs one gate product [B, 6 + H] x [6 + H, 4H] (the pressure part,
     constant over a command's k periods, is computed once per command), one fused gate update
     and the two output layers, and stores the activations; the backward runs three products and
     two fused updates per period, no recomputation. The per-command pressure gradients are
-    block sums of the per-period gate gradients (a cumulative sum, no scatter).
+    block sums of the per-period gate gradients (a cumulative sum, no scatter). `matmul(x, w)`
+    computes the six per-period products.
     """
     hidden = model.hidden
 
     sizes = functools.partial(_loop_sizes, k_max=k_max, unroll=unroll)
 
     def cell(w: LstmWeights, c, h, pose, gate_p):
-        z = jnp.concatenate([pose, h], -1) @ w.w_in + gate_p
+        z = matmul(jnp.concatenate([pose, h], -1), w.w_in) + gate_p
         s_i, s_f, s_o = (jax.nn.sigmoid(z[:, j * hidden : (j + 1) * hidden]) for j in (0, 1, 3))
         t_g = jnp.tanh(z[:, 2 * hidden : 3 * hidden])
         c_new = s_f * c + s_i * t_g
         tanh_c = jnp.tanh(c_new)
         h_new = s_o * tanh_c
-        act = jnp.tanh(h_new @ w.w_fc + w.b_fc)
-        pose_new = act @ w.w_out + w.b_out
+        act = jnp.tanh(matmul(h_new, w.w_fc) + w.b_fc)
+        pose_new = matmul(act, w.w_out) + w.b_out
         # What the backward needs: the input cell state and every activation.
         saved = jnp.concatenate([c, s_i, s_f, t_g, s_o, tanh_c, act], -1)
         return (c_new, h_new, pose_new), saved
@@ -368,8 +382,8 @@ def _make_stretched_lean(model: ForwardModel, k_max: int, unroll: int):
                 )
                 act = block[u][:, 6 * hidden :]
                 d_pose_new = d_pose + cts[u]
-                d_fc = (d_pose_new @ w_out_t) * (1.0 - act * act)
-                d_h_new = d_h + d_fc @ w_fc_t
+                d_fc = matmul(d_pose_new, w_out_t) * (1.0 - act * act)
+                d_h_new = d_h + matmul(d_fc, w_fc_t)
                 d_c_new = d_c + d_h_new * s_o * (1.0 - tanh_c * tanh_c)
                 d_z = jnp.concatenate(
                     [
@@ -380,7 +394,7 @@ def _make_stretched_lean(model: ForwardModel, k_max: int, unroll: int):
                     ],
                     -1,
                 )
-                d_in = d_z @ w_in_t
+                d_in = matmul(d_z, w_in_t)
                 new = (d_c_new * s_f, d_in[:, POSE_DIM:], d_in[:, :POSE_DIM])
                 d_c, d_h, d_pose = (
                     jnp.where(live, a, old) for a, old in zip(new, (d_c, d_h, d_pose), strict=True)

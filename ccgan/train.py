@@ -88,8 +88,9 @@ class TrainConfig:
     gen_unroll: int = 10
     #: F_c periods per loop iteration in the feedback rollout and the choice of k.
     feedback_unroll: int = 25
-    #: The feedback rollout: "lean" or "cell" (`models.forward_stretched` impls) or "pallas"
-    #: (two fused Triton kernels, `ccgan.fused_feedback`; GPU, slower there: bench/feedback.py).
+    #: The feedback rollout: "lean", "lean_reduce" or "cell" (`models.forward_stretched`), or
+    #: "pallas" (two fused Triton kernels, `ccgan.fused_feedback`; GPU, slower there:
+    #: bench/feedback.py).
     feedback_impl: str = "lean"
     #: WCGAN-GP baseline: one generator and one critic on D_c only, no cycle/identity loss.
     baseline: bool = False
@@ -182,7 +183,7 @@ def _mesh_constraint(batch_size: int):
     return lambda x: jax.lax.with_sharding_constraint(x, sharding)
 
 
-FEEDBACK_IMPLS = ("cell", "lean", "pallas")
+FEEDBACK_IMPLS = ("cell", "lean", "lean_reduce", "pallas")
 
 
 def _feedback_rollout(config: TrainConfig, fwd: ForwardModel, forward_c_params):
@@ -316,10 +317,34 @@ def make_trainer(
             losses.gradient_penalty(score, real, fake, key),
         )
 
-    def critic_losses(cparams, gparams, xs, xc, key):
+    def generator_outputs(gparams, xs, xc):
+        """Every generator call of a step, [B, L, 9] each; they depend on the generators only.
+
+        fake_c = G_c(x_s), fake_s = G_s(x_c); same_c = G_c(x_c), same_s = G_s(x_s) (identity);
+        back_s = G_s(fake_c), back_c = G_c(fake_s) (cycle). The baseline has fake_c only.
+        """
+        b = xs.shape[0]
+        if not cycle:
+            return {"fake_c": gen_pair(gparams, xs[None])[0]}
+        # G_c on D_s (translation) and D_c (identity); G_s on D_c and D_s; one call.
+        first = gen_pair(gparams, jnp.stack([jnp.concatenate([xs, xc]), jnp.concatenate([xc, xs])]))
+        fake_c, fake_s = first[0, :b], first[1, :b]
+        back_c, back_s = gen_pair(gparams, jnp.stack([fake_s, fake_c]))
+        return {
+            "fake_c": fake_c,
+            "same_c": first[0, b:],
+            "fake_s": fake_s,
+            "same_s": first[1, b:],
+            "back_c": back_c,
+            "back_s": back_s,
+        }
+
+    def critic_losses(cparams, fakes, xs, xc, key):
         # Real and generated samples per critic: C_c judges D_c, C_s judges D_s.
-        gen_in, real = (jnp.stack([xs, xc]), jnp.stack([xc, xs])) if cycle else (xs[None], xc[None])
-        fake = jax.lax.stop_gradient(gen_pair(gparams, gen_in))
+        if cycle:
+            real, fake = jnp.stack([xc, xs]), jnp.stack([fakes["fake_c"], fakes["fake_s"]])
+        else:
+            real, fake = xc[None], fakes["fake_c"][None]
         keys = jax.random.split(key, real.shape[0])
         wass, gp = jax.vmap(critic_terms)(cparams, real, fake, keys)
         out = {"critic_c": wass[0], "gp_c": gp[0]}
@@ -329,26 +354,24 @@ def make_trainer(
         out["critic_total"] = total
         return total, out
 
-    def generator_losses(gparams, cparams, xs, prev_s, xc, k):
-        b = xs.shape[0]
+    def generator_losses(fakes, cparams, xs, prev_s, xc, k):
+        """Generator loss terms from the outputs of `generator_outputs`."""
+        fake_c = fakes["fake_c"]
         if cycle:
-            # G_c on D_s (translation) and D_c (identity); G_s on D_c and D_s; one call.
-            first = gen_pair(
-                gparams, jnp.stack([jnp.concatenate([xs, xc]), jnp.concatenate([xc, xs])])
-            )
-            fake_c, same_c, fake_s, same_s = first[0, :b], first[0, b:], first[1, :b], first[1, b:]
-            # Back again: G_c(fake_s) and G_s(fake_c).
-            back_c, back_s = gen_pair(gparams, jnp.stack([fake_s, fake_c]))
-            scores = critic_pair(cparams, jnp.stack([fake_c, fake_s]))
+            scores = critic_pair(cparams, jnp.stack([fake_c, fakes["fake_s"]]))
         else:
-            fake_c = gen_pair(gparams, xs[None])[0]
             scores = critic_pair(cparams, fake_c[None])
         adv = sum(losses.generator_adversarial_loss(s) for s in scores)
-        pred = feedback_rollout(fake_c[..., :PRESSURE_DIM], prev_s[:, 0], k)
+        with jax.named_scope("feedback"):
+            pred = feedback_rollout(fake_c[..., :PRESSURE_DIM], prev_s[:, 0], k)
         out = {"feedback": losses.feedback_loss(pred, xs[..., PRESSURE_DIM:])}
         if cycle:
-            out["cycle"] = losses.cycle_loss(back_s, xs) + losses.cycle_loss(back_c, xc)
-            out["identity"] = losses.identity_loss(same_s, xs) + losses.identity_loss(same_c, xc)
+            out["cycle"] = losses.cycle_loss(fakes["back_s"], xs) + losses.cycle_loss(
+                fakes["back_c"], xc
+            )
+            out["identity"] = losses.identity_loss(fakes["same_s"], xs) + losses.identity_loss(
+                fakes["same_c"], xc
+            )
         out["adversarial"] = adv
         total = adv + config.lambda_feedback * out["feedback"]
         if cycle:
@@ -358,20 +381,34 @@ def make_trainer(
         return total, out
 
     def train_step(state: TrainState, inputs):
-        """One critic update then one generator update; inputs = (idx_in [B], idx_c [B], key)."""
+        """One critic update then one generator update; inputs = (idx_in [B], idx_c [B], key).
+
+        The generators run once per step: the critics see their outputs before the update (as
+        a separate forward pass with the same parameters would give), and the generator
+        gradient is the outputs' cotangent pulled back through that same pass.
+        """
         idx_in, idx_c, key = inputs
         xs, prev_s, xc = shard(x_in[idx_in]), shard(prev_in[idx_in]), shard(x_c[idx_c])
         gp, cp = state.params["gen"], state.params["critic"]
 
-        (_, c_out), c_grads = jax.value_and_grad(critic_losses, has_aux=True)(cp, gp, xs, xc, key)
-        c_updates, opt_critic = tx_critic.update(c_grads, state.opt_critic, cp)
-        cp = optax.apply_updates(cp, c_updates)
+        with jax.named_scope("generators_forward"):
+            fakes, generators_vjp = jax.vjp(lambda g: generator_outputs(g, xs, xc), gp)
 
-        (_, g_out), g_grads = jax.value_and_grad(generator_losses, has_aux=True)(
-            gp, cp, xs, prev_s, xc, state.k
-        )
-        g_updates, opt_gen = tx_gen.update(g_grads, state.opt_gen, gp)
-        gp = optax.apply_updates(gp, g_updates)
+        with jax.named_scope("critic_update"):
+            (_, c_out), c_grads = jax.value_and_grad(critic_losses, has_aux=True)(
+                cp, jax.lax.stop_gradient(fakes), xs, xc, key
+            )
+            c_updates, opt_critic = tx_critic.update(c_grads, state.opt_critic, cp)
+            cp = optax.apply_updates(cp, c_updates)
+
+        with jax.named_scope("generator_losses"):
+            (_, g_out), fakes_ct = jax.value_and_grad(generator_losses, has_aux=True)(
+                fakes, cp, xs, prev_s, xc, state.k
+            )
+        with jax.named_scope("generators_backward"):
+            (g_grads,) = generators_vjp(fakes_ct)
+            g_updates, opt_gen = tx_gen.update(g_grads, state.opt_gen, gp)
+            gp = optax.apply_updates(gp, g_updates)
 
         state = state.replace(
             params={"gen": gp, "critic": cp}, opt_gen=opt_gen, opt_critic=opt_critic

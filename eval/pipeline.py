@@ -247,65 +247,90 @@ def load_translator(method: str, cfg: EvalConfig) -> tuple[Translator | None, st
 def oracle_commands(
     arm_c, target_poses: np.ndarray, init_commands: np.ndarray, k: int, cfg: OracleConfig
 ) -> tuple[np.ndarray, dict]:
-    """D_c commands that track the target, optimised through the MJX rollout.
+    """D_c commands that track the targets, optimised through the MJX rollout.
 
     The commands are p_min + (p_max - p_min) * sigmoid(z); z starts at the init commands (clipped
     1% inside the range) and Adam minimises mean(X_err_cm^2) + w^2 mean(phi_err^2), with
-    phi_err^2 ~ 2 (1 - cos). The best iterate is returned.
+    phi_err^2 ~ 2 (1 - cos). Several programs are optimised at once (one vmapped rollout; Adam
+    acts elementwise, so each program's iterates are those of its own optimisation), and each
+    program's best iterate is returned.
 
     Args:
       arm_c: the D_c arm.
-      target_poses: [T, 6] target poses (m, unit d3).
-      init_commands: [T * k, 3] starting commands (bar), e.g. the stretch program.
+      target_poses: [T, 6] or [S, T, 6] target poses (m, unit d3).
+      init_commands: [T * k, 3] or [S, T * k, 3] starting commands (bar), e.g. the stretch
+        program.
       k: control periods per source step.
       cfg: oracle settings.
 
     Returns:
-      (commands [T * k, 3] bar, info with the loss history and timings).
+      (commands [T * k, 3] or [S, T * k, 3] bar, info: "loss_history" [steps] or [steps, S]
+      (the loss of each iterate), "best_loss" (float or [S]), "wall_s", "step_wall_s" (per
+      Adam step; the first includes compiling)).
     """
     import jax
     import jax.numpy as jnp
     import optax
 
+    single = np.ndim(target_poses) == 2
+    targets = np.asarray(target_poses)[None] if single else np.asarray(target_poses)
+    inits = np.asarray(init_commands)[None] if single else np.asarray(init_commands)
+    if targets.shape[0] != inits.shape[0] or inits.shape[1] != targets.shape[1] * k:
+        raise ValueError(
+            f"targets {targets.shape} and init commands {inits.shape} do not match for k = {k}"
+        )
     lo, hi = arm_c.valve.p_min_bar, arm_c.valve.p_max_bar
-    frac = np.clip((np.asarray(init_commands) - lo) / (hi - lo), 0.01, 0.99)
+    frac = np.clip((inits - lo) / (hi - lo), 0.01, 0.99)
     z0 = jnp.asarray(np.log(frac / (1 - frac)), dtype=jnp.float32)
-    target = jnp.asarray(target_poses, dtype=jnp.float32)
-    rollout = arm_c.rollout_fn()
+    target = jnp.asarray(targets, dtype=jnp.float32)
+    rollout = jax.vmap(arm_c.rollout_fn(), in_axes=(None, 0))
     mjx_model = arm_c.mjx_model
     w = cfg.orientation_weight_cm_per_rad
 
     def commands_of(z):
         return lo + (hi - lo) * jax.nn.sigmoid(z)
 
-    def loss_fn(z):
+    def losses_of(z):
+        """[S] loss of each program."""
         poses, ok = rollout(mjx_model, commands_of(z))
-        poses = poses[k - 1 :: k]
-        x_cm2 = jnp.sum((100.0 * (poses[:, :3] - target[:, :3])) ** 2, axis=-1)
-        phi2 = 2.0 * (1.0 - jnp.sum(poses[:, 3:] * target[:, 3:], axis=-1))
-        loss = jnp.mean(x_cm2 + w**2 * phi2)
-        return jnp.where(ok[-1], loss, jnp.inf)
+        poses = poses[:, k - 1 :: k]
+        x_cm2 = jnp.sum((100.0 * (poses[..., :3] - target[..., :3])) ** 2, axis=-1)
+        phi2 = 2.0 * (1.0 - jnp.sum(poses[..., 3:] * target[..., 3:], axis=-1))
+        loss = jnp.mean(x_cm2 + w**2 * phi2, axis=-1)
+        return jnp.where(ok[:, -1], loss, jnp.inf)
 
     opt = optax.adam(cfg.learning_rate)
 
     @jax.jit
-    def step(z, opt_state):
-        loss, grad = jax.value_and_grad(loss_fn)(z)
+    def update(z, opt_state):
+        # The programs are independent: pulling back ones gives each its own gradient.
+        loss, pullback = jax.vjp(losses_of, z)
+        (grad,) = pullback(jnp.ones_like(loss))
         updates, opt_state = opt.update(grad, opt_state, z)
         return optax.apply_updates(z, updates), opt_state, loss
 
     t0 = time.perf_counter()
     z, opt_state = z0, opt.init(z0)
-    best_z, best_loss, history = z0, np.inf, []
+    best_z, best_loss, history, step_wall_s = z0, np.full(z0.shape[0], np.inf), [], []
     for _ in range(cfg.steps):
-        new_z, opt_state, loss = step(z, opt_state)
-        loss = float(loss)  # the loss of z, before this update
+        t_step = time.perf_counter()
+        new_z, opt_state, loss = update(z, opt_state)
+        loss = np.asarray(loss)  # the loss of z, before this update
+        step_wall_s.append(time.perf_counter() - t_step)
         history.append(loss)
-        if loss < best_loss:
-            best_z, best_loss = z, loss
+        better = loss < best_loss
+        best_z = jnp.where(jnp.asarray(better)[:, None, None], z, best_z)
+        best_loss = np.where(better, loss, best_loss)
         z = new_z
-    info = {"loss_history": history, "best_loss": best_loss, "wall_s": time.perf_counter() - t0}
-    return np.asarray(commands_of(best_z), dtype=np.float64), info
+    commands = np.asarray(commands_of(best_z), dtype=np.float64)
+    history = np.asarray(history).reshape(len(history), -1)
+    info = {
+        "loss_history": history[:, 0].tolist() if single else history.tolist(),
+        "best_loss": float(best_loss[0]) if single else best_loss.tolist(),
+        "wall_s": time.perf_counter() - t0,
+        "step_wall_s": step_wall_s,
+    }
+    return (commands[0] if single else commands), info
 
 
 # --------------------------------------------------------------------------------- evaluation
@@ -423,32 +448,58 @@ def evaluate(cfg: EvalConfig, command: str = "", log=print) -> dict:
         stochastic = method in translators and translators[method].takes_seed
         return list(cfg.seeds) if stochastic else list(cfg.seeds[:1])
 
+    # Targets first: the oracle optimises every shape at once (one vmapped MJX rollout).
+    programs, targets = {}, {}
+    for shape in cfg.shapes:
+        t0 = time.perf_counter()
+        programs[shape] = shapes.SHAPES[shape](cfg.duration_s)
+        targets[shape] = arm_s.rollout(programs[shape], backend=cfg.backend)
+        timings[f"shape_{shape}_s"] = time.perf_counter() - t0
+    oracle_out: dict[str, tuple] = {}
+    if "oracle" in methods:
+        n_steps = min(t.shape[0] for t in targets.values())
+        horizon = n_steps
+        if cfg.oracle.horizon_s is not None:
+            horizon = max(1, min(n_steps, int(round(cfg.oracle.horizon_s * shapes.CONTROL_HZ))))
+        t0 = time.perf_counter()
+        cmds, info = oracle_commands(
+            arm_c,
+            np.stack([targets[s][:horizon] for s in cfg.shapes]),
+            np.stack([stretch(programs[s][:horizon], k_stretch) for s in cfg.shapes]),
+            k_stretch,
+            cfg.oracle,
+        )
+        timings["oracle_s"] = time.perf_counter() - t0
+        history = np.asarray(info["loss_history"]).reshape(cfg.oracle.steps, len(cfg.shapes))
+        for i, shape in enumerate(cfg.shapes):
+            first = float(history[0, i]) if cfg.oracle.steps else None
+            oracle_out[shape] = (cmds[i], horizon, first, info["best_loss"][i])
+        log(
+            f"oracle: {len(cfg.shapes)} shapes x {horizon} steps optimised together,"
+            f" {cfg.oracle.steps} Adam steps, {timings['oracle_s']:.1f} s"
+        )
+
     table: dict[str, dict] = {}
     trajectories: dict[str, dict] = {}
     for shape in cfg.shapes:
         t_shape = time.perf_counter()
-        p_s = shapes.SHAPES[shape](cfg.duration_s)
-        target = arm_s.rollout(p_s, backend=cfg.backend)
+        p_s, target = programs[shape], targets[shape]
         n_steps = target.shape[0]
         traj = {"pressures_s": p_s, "target": target, "poses": {}, "commands": {}, "k": {}}
         rows = {}
         oracle_summary, horizon = None, n_steps
-        if "oracle" in methods:
-            horizon = n_steps
-            if cfg.oracle.horizon_s is not None:
-                horizon = max(1, min(n_steps, int(round(cfg.oracle.horizon_s * shapes.CONTROL_HZ))))
+        if shape in oracle_out:
+            cmd, horizon, loss_first, loss_best = oracle_out[shape]
             t0 = time.perf_counter()
-            init = stretch(p_s[:horizon], k_stretch)
-            cmd, info = oracle_commands(arm_c, target[:horizon], init, k_stretch, cfg.oracle)
             poses_o = run_dc(arm_c, cmd, k_stretch, cfg.backend)
             row = metrics.tracking_errors(poses_o, target[:horizon])
             oracle_summary = {"x": row["x_err_cm_mean"], "phi": row["phi_err_rad_mean"]}
             row.update(
                 k=k_stretch,
                 window_steps=horizon,
-                oracle_loss_first=info["loss_history"][0] if info["loss_history"] else None,
-                oracle_loss_best=info["best_loss"],
-                wall_s=time.perf_counter() - t0,
+                oracle_loss_first=loss_first,
+                oracle_loss_best=loss_best,
+                wall_s=time.perf_counter() - t0 + timings["oracle_s"] / len(cfg.shapes),
             )
             row["x_err_cm_mean_oracle_window"] = row["x_err_cm_mean"]
             row["phi_err_rad_mean_oracle_window"] = row["phi_err_rad_mean"]
@@ -476,7 +527,7 @@ def evaluate(cfg: EvalConfig, command: str = "", log=print) -> dict:
             rows[method] = row
         table[shape] = rows
         trajectories[shape] = traj
-        timings[f"shape_{shape}_s"] = time.perf_counter() - t_shape
+        timings[f"shape_{shape}_s"] += time.perf_counter() - t_shape
         log(
             f"{shape}: "
             + ", ".join(

@@ -194,3 +194,33 @@ def test_translator_per_trained_seed(tmp_path):
     # A seed without its own model: the single checkpoint serves every seed.
     three = pipeline.load_translator("ccgan", pipeline.EvalConfig(seeds=(0, 1, 2), ccgan_path=path))
     assert three[0].trained_seeds == {}
+
+
+def test_oracle_lowers_the_loss_and_batches_like_one_program(small_xml):
+    """Adam through the MJX rollout: better than its start, in the valve range, and two programs
+    optimised together get exactly the iterates each gets alone (Adam acts elementwise)."""
+    arm_s = mjx_arm.load(xml=small_xml, domain="source")
+    arm_c = mjx_arm.load(xml=small_xml, domain="constrained")
+    k, n = 2, 4
+    programs = [shapes.circle(3.0)[10 : 10 + n], shapes.kite(3.0)[10 : 10 + n]]
+    targets = np.stack([arm_s.rollout(p, backend="c") for p in programs])
+    inits = np.stack([pipeline.stretch(p, k) for p in programs])
+    cfg = pipeline.OracleConfig(steps=4, learning_rate=0.3)
+    both, info = pipeline.oracle_commands(arm_c, targets, inits, k, cfg)
+    assert both.shape == (2, n * k, 3)
+    lo, hi = arm_c.valve.p_min_bar, arm_c.valve.p_max_bar
+    assert both.min() >= lo and both.max() <= hi
+    history = np.asarray(info["loss_history"])
+    assert history.shape == (4, 2) and np.isfinite(history).all()
+    np.testing.assert_allclose(info["best_loss"], history.min(axis=0))
+    assert (history.min(axis=0) < history[0]).all()  # it improved on the stretch program
+    one, info_one = pipeline.oracle_commands(arm_c, targets[1], inits[1], k, cfg)
+    np.testing.assert_allclose(one, both[1], rtol=1e-5, atol=1e-6)
+    np.testing.assert_allclose(info_one["loss_history"], history[:, 1], rtol=1e-5)
+    # The tracking error of the returned commands in the C simulator is the optimised one.
+    poses = pipeline.run_dc(arm_c, one, k, "c")
+    x_err = metrics.position_error_cm(poses, targets[1])
+    stretch_err = metrics.position_error_cm(pipeline.run_dc(arm_c, inits[1], k, "c"), targets[1])
+    assert x_err.mean() < stretch_err.mean()
+    with pytest.raises(ValueError, match="do not match"):
+        pipeline.oracle_commands(arm_c, targets, inits[:, :-1], k, cfg)
