@@ -214,7 +214,7 @@ def main(argv=None) -> None:
         "",
     ]
     for impl in args.feedback_impls:
-        conf = dataclasses.replace(config, feedback_impl=impl)
+        conf = dataclasses.replace(config, feedback_impl=train_lib.resolved_feedback_impl(impl))
         res = profile_impl(conf, data, fc_params, fwd, args.k, args.epochs)
         report["results"].append(res)
         print(json.dumps(res)[:2000], flush=True)

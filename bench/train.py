@@ -190,6 +190,7 @@ def main(argv=None) -> None:
         help="feedback rollout implementations timed (TrainConfig.feedback_impl)",
     )
     args = parser.parse_args(argv)
+    args.feedback_impls = [train_lib.resolved_feedback_impl(i) for i in args.feedback_impls]
 
     config = train_lib.TrainConfig(feedback_impl=args.feedback_impls[0], epochs=args.paper_epochs)
     if args.feedback_unroll:

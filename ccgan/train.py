@@ -88,10 +88,11 @@ class TrainConfig:
     gen_unroll: int = 10
     #: F_c periods per loop iteration in the feedback rollout and the choice of k.
     feedback_unroll: int = 25
-    #: The feedback rollout: "lean", "lean_reduce" or "cell" (`models.forward_stretched`), or
-    #: "pallas" (two fused Triton kernels, `ccgan.fused_feedback`; GPU, slower there:
-    #: bench/feedback.py).
-    feedback_impl: str = "lean"
+    #: The feedback rollout: "lean", "lean_reduce" or "cell" (`models.forward_stretched`),
+    #: "pallas" (two fused Triton kernels, `ccgan.fused_feedback`; slower on the GPU:
+    #: bench/feedback.py), or "auto": "lean_reduce" on a GPU (12% faster training on an H200),
+    #: "lean" elsewhere (lean_reduce is ~9x slower on a CPU): bench/results/*/profile_step*.md.
+    feedback_impl: str = "auto"
     #: WCGAN-GP baseline: one generator and one critic on D_c only, no cycle/identity loss.
     baseline: bool = False
     #: Epochs between checkpoints (also the driver's jitted chunk and tqdm tick).
@@ -183,14 +184,22 @@ def _mesh_constraint(batch_size: int):
     return lambda x: jax.lax.with_sharding_constraint(x, sharding)
 
 
-FEEDBACK_IMPLS = ("cell", "lean", "lean_reduce", "pallas")
+FEEDBACK_IMPLS = ("auto", "cell", "lean", "lean_reduce", "pallas")
+
+
+def resolved_feedback_impl(impl: str) -> str:
+    """ "auto" -> "lean_reduce" on a GPU, "lean" elsewhere; any other name unchanged."""
+    if impl != "auto":
+        return impl
+    return "lean_reduce" if jax.default_backend() == "gpu" else "lean"
 
 
 def _feedback_rollout(config: TrainConfig, fwd: ForwardModel, forward_c_params):
     """`(commands [B, L, 3], pose0 [B, 6], k) -> F_c poses [B, L, 6]`, held k periods each."""
     if config.feedback_impl not in FEEDBACK_IMPLS:
         raise ValueError(f"feedback_impl must be one of {FEEDBACK_IMPLS}: {config.feedback_impl!r}")
-    if config.feedback_impl == "pallas":
+    impl = resolved_feedback_impl(config.feedback_impl)
+    if impl == "pallas":
         weights = fused_weights(forward_c_params)
         fused = make_forward_stretched_fused(config.k_max, interpret=jax.default_backend() != "gpu")
         return lambda commands, pose0, k: fused(weights, commands, pose0, k)
@@ -202,7 +211,7 @@ def _feedback_rollout(config: TrainConfig, fwd: ForwardModel, forward_c_params):
         k,
         config.k_max,
         config.feedback_unroll,
-        impl=config.feedback_impl,
+        impl=impl,
     )
 
 

@@ -72,6 +72,21 @@ def test_network_shapes_no_nan(t):
     assert c.shape == (2,) and jnp.isfinite(c).all()
 
 
+def test_time_conv_equals_flax_conv():
+    """The critic's matmul convolution: nn.Conv's variables, init and values (kernel 3 and 4)."""
+    import flax.linen as nn
+
+    x = jax.random.normal(jax.random.PRNGKey(0), (2, 3, 7, 5))  # extra leading axis (vmap-like)
+    for kernel in (3, 4):
+        ours, ref = models.TimeConv(6, kernel), nn.Conv(6, (kernel,), padding="SAME")
+        v_ours, v_ref = ours.init(jax.random.PRNGKey(1), x), ref.init(jax.random.PRNGKey(1), x)
+        assert jax.tree.map(jnp.shape, v_ours) == jax.tree.map(jnp.shape, v_ref)
+        for a, b in zip(jax.tree.leaves(v_ours), jax.tree.leaves(v_ref), strict=True):
+            np.testing.assert_array_equal(a, b)
+        v = jax.tree.map(lambda a: a + 0.1, v_ref)  # non-zero bias too
+        np.testing.assert_allclose(ours.apply(v, x), ref.apply(v, x), rtol=1e-5, atol=1e-5)
+
+
 def test_stretched_forward_matches_held_open_loop():
     key = jax.random.PRNGKey(1)
     fwd = models.ForwardModel(hidden=8, fc=5)
