@@ -547,14 +547,17 @@ def evaluate(cfg: EvalConfig, command: str = "", log=print) -> dict:
             noise[shape], periodicity[shape] = {}, {}
             for method in robust_methods:
                 res, keep = {}, {}
+                # Every noise level and seed in one batched rollout (one thread each).
+                cmds = []
                 for std in cfg.noise_stds:
-                    cmds = []
                     for seed in cfg.seeds:
                         cmd, k = commands_for(method, add_noise(p_s, std, seed), target, seed)
                         cmds.append(cmd)
-                    poses = run_dc(arm_c, np.stack(cmds), k, cfg.backend)
-                    res[str(std)] = metrics.tracking_errors(poses, target)
-                    keep[std] = poses[0]
+                poses = run_dc(arm_c, np.stack(cmds), k, cfg.backend)
+                poses = poses.reshape(len(cfg.noise_stds), len(cfg.seeds), *poses.shape[1:])
+                for std, poses_std in zip(cfg.noise_stds, poses, strict=True):
+                    res[str(std)] = metrics.tracking_errors(poses_std, target)
+                    keep[std] = poses_std[0]
                 noise[shape][method] = res
                 traj.setdefault("noise", {})[method] = keep
                 # Repetitions of one translator: a sampling translator draws seeds 0..R-1; one
