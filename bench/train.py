@@ -223,7 +223,7 @@ def main(argv=None) -> None:
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     lines = [
-        f"# CCGAN-GP training time ({report['device']}, {report['cpu']})",
+        f"# CCGAN-GP training time ({report['device']} x {report['n_devices']}, {report['cpu']})",
         "",
         f"{n_traj} trajectories x {args.samples} samples per domain ({config.n_val} held out), "
         f"window {config.window_length}, batch {config.batch_size}: {steps} steps per epoch; "
