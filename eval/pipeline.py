@@ -18,11 +18,13 @@ Methods:
            found at results/wcgan/translator.ckpt.
   oracle   D_c commands [T * k, 3] optimised directly through the differentiable MJX rollout with
            optax Adam (k = the stretch k), commands kept in the valve range by a sigmoid, starting
-           from the stretch program; a lower reference for the other methods. Backward passes
-           through MJX are slow on CPU, so by default the oracle optimises (and every method's
-           ratio to it is computed over) the first `OracleConfig.horizon_s` seconds only, and
-           the CLI leaves it out on CPU unless asked (measured here: ~25 ms per physics step
-           for the backward pass, and ~2 min to compile the gradient even for 3 segments).
+           from the stretch program; a lower reference for the other methods. All shapes are
+           optimised together (one vmapped rollout). Gradients through thousands of MJX steps
+           are slow, so the oracle optimises (and every method's ratio to it is computed over)
+           the first `OracleConfig.horizon_s` seconds only, and the CLI leaves it out on CPU
+           unless asked: five 2 s programs at k = 10 (5,000 physics steps each) take ~3 min to
+           compile and ~31 s per Adam step on a 2-core CPU (results/full/shapes.json), ~100 s
+           and 11.6 s on an H200 (bench/results/h200/oracle.md).
 """
 
 from __future__ import annotations
@@ -405,8 +407,8 @@ def evaluate(cfg: EvalConfig, command: str = "", log=print) -> dict:
     if run_oracle and jax.default_backend() == "cpu" and cfg.xml is None and cfg.oracle.steps > 0:
         if cfg.oracle.horizon_s is None or cfg.oracle.horizon_s > 5.0:
             note = (
-                "oracle on CPU with a horizon over 5 s: expect hours (MJX backward passes take"
-                " ~25 ms per physics step on CPU)."
+                "oracle on CPU with a horizon over 5 s: expect hours (measured on a 2-core CPU:"
+                " ~31 s per Adam step for five 2 s programs at k = 10)."
             )
             notes.append(note)
             log("NOTE: " + note)
@@ -790,12 +792,12 @@ def parse_args(argv: list[str] | None = None) -> EvalConfig:
 
         methods = list(METHODS)
         if jax.default_backend() == "cpu":
-            # Measured: MJX backward passes cost ~25 ms per physics step on this CPU, so even a
-            # 2 s window at k = 5 takes minutes per Adam step. Ask for it with --methods.
+            # Measured on a 2-core CPU: ~3 min to compile and ~31 s per Adam step for five 2 s
+            # programs at k = 10, which would take the main job past 15 min. Ask with --methods.
             methods.remove("oracle")
             print(
-                "NOTE: oracle left out by default on CPU (MJX gradients are too slow here);"
-                " add it with --methods ... oracle."
+                "NOTE: oracle left out by default on CPU (MJX gradients: ~8 min more on 2 cores"
+                " with --oracle-steps 10); add it with --methods ... oracle."
             )
     horizon = None if a.oracle_horizon is not None and a.oracle_horizon <= 0 else a.oracle_horizon
     cfg = EvalConfig(

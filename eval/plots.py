@@ -10,6 +10,8 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
+from eval.shapes import CONTROL_HZ  # noqa: E402
+
 CM = 100.0
 COLORS = {
     "target": "tab:blue",
@@ -71,7 +73,12 @@ def error_bars_figure(table: dict, methods: list[str], path: Path) -> None:
             mean = [table[s][m][f"{key}_mean"] if m in table[s] else np.nan for s in shapes]
             std = [table[s][m][f"{key}_std"] if m in table[s] else np.nan for s in shapes]
             x = np.arange(len(shapes)) + (i - (len(methods) - 1) / 2) * width
-            ax.bar(x, mean, width, yerr=std, color=COLORS.get(m), label=LABELS.get(m), capsize=2)
+            label = LABELS.get(m)
+            window = [table[s][m].get("window_steps") for s in shapes if m in table[s]]
+            if m == "oracle" and window and window[0]:
+                # The oracle optimises only the start of each program; the others span all of it.
+                label = f"{label} (first {window[0] / CONTROL_HZ:g} s only)"
+            ax.bar(x, mean, width, yerr=std, color=COLORS.get(m), label=label, capsize=2)
         ax.set_xticks(np.arange(len(shapes)), shapes, rotation=20)
         ax.set_ylabel(unit)
         ax.legend(fontsize=8)
