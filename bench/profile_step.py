@@ -133,15 +133,9 @@ def profile_once(compiled, args, trace_dir: str) -> float:
 
 
 def profile_impl(config, data, fc_params, fwd, k: int, epochs: int) -> dict:
-    timing = time_epochs(config, data, fc_params, fwd, 1, k, epochs)
-    trainer = train_lib.make_trainer(config, data, fc_params, fwd)
-    keys = jax.random.split(jax.random.PRNGKey(0), 1)
-    state = jax.jit(jax.vmap(trainer.init))(keys)
-    state = state.replace(k=jnp.full_like(state.k, k))
-    run = jax.jit(jax.vmap(trainer.run_epochs, in_axes=(0, 0, None, None)), static_argnums=3)
-    compiled = run.lower(state, keys, jnp.int32(0), epochs).compile()
-    args = (state, keys, jnp.int32(0))
-    jax.tree.map(lambda x: x.block_until_ready(), compiled(*args))
+    timing, (compiled, args) = time_epochs(
+        config, data, fc_params, fwd, 1, k, epochs, return_compiled=True
+    )
     with tempfile.TemporaryDirectory() as tmp:
         wall_s = profile_once(compiled, args, tmp)
         events = device_kernels(tmp, op_names(compiled.as_text()))

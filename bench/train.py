@@ -58,8 +58,14 @@ def _block(tree):
     return jax.tree.map(lambda x: x.block_until_ready(), tree)
 
 
-def time_epochs(config, data, fc_params, fwd, n_seeds: int, k: int, epochs: int) -> dict:
-    """Compile time and seconds per epoch of `run_epochs` for n_seeds vmapped seeds at hold k."""
+def time_epochs(
+    config, data, fc_params, fwd, n_seeds: int, k: int, epochs: int, return_compiled: bool = False
+):
+    """Compile time and seconds per epoch of `run_epochs` for n_seeds vmapped seeds at hold k.
+
+    Returns the timings dict, and with `return_compiled` also (compiled run, its arguments), so a
+    caller can run the same executable again without compiling it twice.
+    """
     trainer = train_lib.make_trainer(config, data, fc_params, fwd)
     keys = jax.random.split(jax.random.PRNGKey(0), n_seeds)
     state = _block(jax.jit(jax.vmap(trainer.init))(keys))
@@ -85,7 +91,7 @@ def time_epochs(config, data, fc_params, fwd, n_seeds: int, k: int, epochs: int)
     for _ in range(reps):
         _block(val_compiled(state))
     select_s = (time.perf_counter() - t0) / reps
-    return {
+    timings = {
         "seeds": n_seeds,
         "k": k,
         "compile_s": compile_s,
@@ -94,6 +100,9 @@ def time_epochs(config, data, fc_params, fwd, n_seeds: int, k: int, epochs: int)
         "select_s": select_s,
         "epoch_with_select_s": epoch_s + select_s / config.stretch_every,
     }
+    if return_compiled:
+        return timings, (compiled, (state, keys, jnp.int32(0)))
+    return timings
 
 
 def run_paper_to_workdir(config, data, fc_params, fwd, seeds, workdir: Path) -> dict:

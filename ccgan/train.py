@@ -91,7 +91,8 @@ class TrainConfig:
     #: The feedback rollout: "lean", "lean_reduce" or "cell" (`models.forward_stretched`),
     #: "pallas" (two fused Triton kernels, `ccgan.fused_feedback`; slower on the GPU:
     #: bench/feedback.py), or "auto": "lean_reduce" on a GPU (12% faster training on an H200),
-    #: "lean" elsewhere (lean_reduce is ~9x slower on a CPU): bench/results/*/profile_step*.md.
+    #: "lean" elsewhere (lean_reduce is 8x slower on a 2-core CPU); measured in
+    #: bench/results/h200/profile_step_dedup.md and bench/results/cpu/train_feedback_impls.md.
     feedback_impl: str = "auto"
     #: WCGAN-GP baseline: one generator and one critic on D_c only, no cycle/identity loss.
     baseline: bool = False

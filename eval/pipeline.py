@@ -22,9 +22,9 @@ Methods:
            optimised together (one vmapped rollout). Gradients through thousands of MJX steps
            are slow, so the oracle optimises (and every method's ratio to it is computed over)
            the first `OracleConfig.horizon_s` seconds only, and the CLI leaves it out on CPU
-           unless asked: five 2 s programs at k = 10 (5,000 physics steps each) take ~3 min to
-           compile and ~31 s per Adam step on a 2-core CPU (results/full/shapes.json), ~100 s
-           and 11.6 s on an H200 (bench/results/h200/oracle.md).
+           unless asked: five 2 s programs at k = 10 (5,000 physics steps each), 10 Adam steps,
+           took 500 s on a 2-core CPU, compile included (results/full/shapes.json); on an H200
+           the first step took 98 s and each further one 11.6 s (bench/results/h200/oracle.md).
 """
 
 from __future__ import annotations
@@ -325,7 +325,7 @@ def oracle_commands(
         best_loss = np.where(better, loss, best_loss)
         z = new_z
     commands = np.asarray(commands_of(best_z), dtype=np.float64)
-    history = np.asarray(history).reshape(len(history), -1)
+    history = np.asarray(history).reshape(len(history), z0.shape[0])
     info = {
         "loss_history": history[:, 0].tolist() if single else history.tolist(),
         "best_loss": float(best_loss[0]) if single else best_loss.tolist(),
@@ -408,7 +408,7 @@ def evaluate(cfg: EvalConfig, command: str = "", log=print) -> dict:
         if cfg.oracle.horizon_s is None or cfg.oracle.horizon_s > 5.0:
             note = (
                 "oracle on CPU with a horizon over 5 s: expect hours (measured on a 2-core CPU:"
-                " ~31 s per Adam step for five 2 s programs at k = 10)."
+                " 500 s for 10 Adam steps of five 2 s programs at k = 10)."
             )
             notes.append(note)
             log("NOTE: " + note)
@@ -792,8 +792,8 @@ def parse_args(argv: list[str] | None = None) -> EvalConfig:
 
         methods = list(METHODS)
         if jax.default_backend() == "cpu":
-            # Measured on a 2-core CPU: ~3 min to compile and ~31 s per Adam step for five 2 s
-            # programs at k = 10, which would take the main job past 15 min. Ask with --methods.
+            # Measured on a 2-core CPU: 500 s for 10 Adam steps of five 2 s programs at k = 10
+            # (results/full), which would take the main job past 15 min. Ask with --methods.
             methods.remove("oracle")
             print(
                 "NOTE: oracle left out by default on CPU (MJX gradients: ~8 min more on 2 cores"
