@@ -35,6 +35,7 @@ import inspect
 import json
 import os
 import sys
+import threading
 import time
 from pathlib import Path
 
@@ -153,6 +154,23 @@ def every_kth(poses_c: np.ndarray, k: int) -> np.ndarray:
 def run_dc(arm_c, commands_c: np.ndarray, k: int, backend: str) -> np.ndarray:
     """D_c rollout(s) from rest of commands [..., T * k, 3] (bar); returns [..., T, 6] poses."""
     return every_kth(arm_c.rollout(commands_c, backend=backend), k)
+
+
+def rollout_grouped(arm, jobs: list[tuple[np.ndarray, int]], backend: str) -> list[np.ndarray]:
+    """Poses of many (commands [T * k, 3] bar, k) jobs, every k-th pose ([T, 6] each).
+
+    Jobs of the same command length and k run as one batched rollout (MuJoCo C: one thread per
+    trajectory; MJX: one vmapped call), so a many-core machine runs them side by side.
+    """
+    groups: dict[tuple, list[int]] = {}
+    for i, (cmd, k) in enumerate(jobs):
+        groups.setdefault((np.shape(cmd), int(k)), []).append(i)
+    out: list[np.ndarray | None] = [None] * len(jobs)
+    for (_, k), index in groups.items():
+        poses = run_dc(arm, np.stack([jobs[i][0] for i in index]), k, backend)
+        for i, p in zip(index, poses, strict=True):
+            out[i] = p
+    return out
 
 
 def choose_stretch_k(arm_s, arm_c, cfg: EvalConfig) -> tuple[int, dict[int, float]]:
@@ -350,6 +368,28 @@ def add_noise(pressures_bar: np.ndarray, std: float, seed: int) -> np.ndarray:
     return np.clip(noisy, 0.0, 1.0) * scale
 
 
+class _InThread:
+    """Runs fn(*args) in a daemon thread (an error elsewhere does not wait for it to finish)."""
+
+    def __init__(self, fn, *args):
+        self._out, self._err = None, None
+        self._thread = threading.Thread(target=self._run, args=(fn, args), daemon=True)
+        self._thread.start()
+
+    def _run(self, fn, args):
+        try:
+            self._out = fn(*args)
+        except BaseException as err:  # noqa: BLE001  (re-raised in result())
+            self._err = err
+
+    def result(self):
+        """fn's return value; re-raises fn's exception."""
+        self._thread.join()
+        if self._err is not None:
+            raise self._err
+        return self._out
+
+
 def _errors_with_ratio(poses, target, oracle_summary, horizon):
     out = metrics.tracking_errors(poses, target)
     if oracle_summary is not None:
@@ -451,49 +491,98 @@ def evaluate(cfg: EvalConfig, command: str = "", log=print) -> dict:
         return list(cfg.seeds) if stochastic else list(cfg.seeds[:1])
 
     # Targets first: the oracle optimises every shape at once (one vmapped MJX rollout).
-    programs, targets = {}, {}
-    for shape in cfg.shapes:
-        t0 = time.perf_counter()
-        programs[shape] = shapes.SHAPES[shape](cfg.duration_s)
-        targets[shape] = arm_s.rollout(programs[shape], backend=cfg.backend)
-        timings[f"shape_{shape}_s"] = time.perf_counter() - t0
-    oracle_out: dict[str, tuple] = {}
+    t0 = time.perf_counter()
+    programs = {shape: shapes.SHAPES[shape](cfg.duration_s) for shape in cfg.shapes}
+    target_list = rollout_grouped(arm_s, [(programs[s], 1) for s in cfg.shapes], cfg.backend)
+    targets = dict(zip(cfg.shapes, target_list, strict=True))
+    timings["targets_s"] = time.perf_counter() - t0
+
+    # The oracle runs in a worker thread (JAX releases the GIL) while the translators and the
+    # MuJoCo C rollouts below keep the CPU cores busy; on a GPU machine the two overlap.
+    oracle_future, horizon = None, None
     if "oracle" in methods:
         n_steps = min(t.shape[0] for t in targets.values())
         horizon = n_steps
         if cfg.oracle.horizon_s is not None:
             horizon = max(1, min(n_steps, int(round(cfg.oracle.horizon_s * shapes.CONTROL_HZ))))
-        t0 = time.perf_counter()
-        cmds, info = oracle_commands(
+        oracle_future = _InThread(
+            oracle_commands,
             arm_c,
             np.stack([targets[s][:horizon] for s in cfg.shapes]),
             np.stack([stretch(programs[s][:horizon], k_stretch) for s in cfg.shapes]),
             k_stretch,
             cfg.oracle,
         )
-        timings["oracle_s"] = time.perf_counter() - t0
+
+    # Every method, seed, noise level and repetition of every shape: commands first, then one
+    # batched D_c rollout per command length (one thread per trajectory on MuJoCo C).
+    t0 = time.perf_counter()
+    jobs, keys = [], []
+
+    def add_job(key, method, p_s, target, seed):
+        jobs.append(commands_for(method, p_s, target, seed))
+        keys.append(key)
+
+    translated = [m for m in methods if m != "oracle"]
+    robust_methods = [m for m in ("stretch", "ccgan", "wcgan") if m in methods]
+    robust_methods = robust_methods if cfg.robustness else []
+    for shape in cfg.shapes:
+        p_s, target = programs[shape], targets[shape]
+        for method in translated:
+            for seed in seeds_for(method):
+                add_job(("table", shape, method, seed), method, p_s, target, seed)
+        for method in robust_methods:
+            for std in cfg.noise_stds:
+                for seed in cfg.seeds:
+                    add_job(
+                        ("noise", shape, method, std, seed),
+                        method,
+                        add_noise(p_s, std, seed),
+                        target,
+                        seed,
+                    )
+            # Repetitions of one translator: a sampling translator draws seeds 0..R-1; one
+            # with a model per training seed repeats the first seed's model.
+            trained = method in translators and translators[method].trained_seeds
+            rep_seeds = [cfg.seeds[0]] * cfg.n_repeats if trained else range(cfg.n_repeats)
+            for rep, seed in enumerate(rep_seeds):
+                add_job(("repeat", shape, method, rep), method, p_s, target, seed)
+    timings["commands_s"] = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    poses_of = dict(zip(keys, rollout_grouped(arm_c, jobs, cfg.backend), strict=True))
+    commands_of = dict(zip(keys, jobs, strict=True))
+    timings["dc_rollouts_s"] = time.perf_counter() - t0
+    log(
+        f"{len(jobs)} D_c rollouts ({cfg.backend}): commands {timings['commands_s']:.1f} s,"
+        f" rollouts {timings['dc_rollouts_s']:.1f} s"
+    )
+
+    oracle_out: dict[str, tuple] = {}
+    if oracle_future is not None:
+        t0 = time.perf_counter()
+        cmds, info = oracle_future.result()
+        timings["oracle_s"] = info["wall_s"]
+        timings["oracle_wait_s"] = time.perf_counter() - t0
         history = np.asarray(info["loss_history"]).reshape(cfg.oracle.steps, len(cfg.shapes))
+        oracle_poses = rollout_grouped(arm_c, [(c, k_stretch) for c in cmds], cfg.backend)
         for i, shape in enumerate(cfg.shapes):
             first = float(history[0, i]) if cfg.oracle.steps else None
-            oracle_out[shape] = (cmds[i], horizon, first, info["best_loss"][i])
+            oracle_out[shape] = (cmds[i], oracle_poses[i], first, info["best_loss"][i])
         log(
             f"oracle: {len(cfg.shapes)} shapes x {horizon} steps optimised together,"
             f" {cfg.oracle.steps} Adam steps, {timings['oracle_s']:.1f} s"
+            f" (waited {timings['oracle_wait_s']:.1f} s for it after the rollouts)"
         )
 
     table: dict[str, dict] = {}
     trajectories: dict[str, dict] = {}
     for shape in cfg.shapes:
-        t_shape = time.perf_counter()
         p_s, target = programs[shape], targets[shape]
-        n_steps = target.shape[0]
         traj = {"pressures_s": p_s, "target": target, "poses": {}, "commands": {}, "k": {}}
         rows = {}
-        oracle_summary, horizon = None, n_steps
+        oracle_summary = None
         if shape in oracle_out:
-            cmd, horizon, loss_first, loss_best = oracle_out[shape]
-            t0 = time.perf_counter()
-            poses_o = run_dc(arm_c, cmd, k_stretch, cfg.backend)
+            cmd, poses_o, loss_first, loss_best = oracle_out[shape]
             row = metrics.tracking_errors(poses_o, target[:horizon])
             oracle_summary = {"x": row["x_err_cm_mean"], "phi": row["phi_err_rad_mean"]}
             row.update(
@@ -501,7 +590,6 @@ def evaluate(cfg: EvalConfig, command: str = "", log=print) -> dict:
                 window_steps=horizon,
                 oracle_loss_first=loss_first,
                 oracle_loss_best=loss_best,
-                wall_s=time.perf_counter() - t0 + timings["oracle_s"] / len(cfg.shapes),
             )
             row["x_err_cm_mean_oracle_window"] = row["x_err_cm_mean"]
             row["phi_err_rad_mean_oracle_window"] = row["phi_err_rad_mean"]
@@ -510,71 +598,49 @@ def evaluate(cfg: EvalConfig, command: str = "", log=print) -> dict:
             rows["oracle"] = row
             traj["poses"]["oracle"], traj["commands"]["oracle"] = poses_o, cmd
             traj["k"]["oracle"] = k_stretch
-        for method in methods:
-            if method == "oracle":
-                continue
-            t0 = time.perf_counter()
-            poses_all = []
-            for seed in seeds_for(method):
-                cmd, k = commands_for(method, p_s, target, seed)
-                poses_all.append(run_dc(arm_c, cmd, k, cfg.backend))
-                if len(poses_all) == 1:
-                    traj["poses"][method], traj["commands"][method] = poses_all[0], cmd
-                    traj["k"][method] = k
-            poses_all = np.stack(poses_all)
-            row = _errors_with_ratio(poses_all, target, oracle_summary, horizon)
-            row.update(k=traj["k"][method], n_seeds=len(poses_all))
-            row.update(fc_errors(traj["commands"][method], traj["k"][method], target))
-            row["wall_s"] = time.perf_counter() - t0
+        for method in translated:
+            seeds = seeds_for(method)
+            first = ("table", shape, method, seeds[0])
+            cmd, k = commands_of[first]
+            traj["poses"][method], traj["commands"][method], traj["k"][method] = (
+                poses_of[first],
+                cmd,
+                k,
+            )
+            poses_all = np.stack([poses_of["table", shape, method, s] for s in seeds])
+            row = _errors_with_ratio(poses_all, target, oracle_summary, horizon or len(target))
+            row.update(k=k, n_seeds=len(poses_all))
+            row.update(fc_errors(cmd, k, target))
             rows[method] = row
         table[shape] = rows
         trajectories[shape] = traj
-        timings[f"shape_{shape}_s"] += time.perf_counter() - t_shape
         log(
             f"{shape}: "
             + ", ".join(
                 f"{m} {r['x_err_cm_mean']:.3f} cm / {r['phi_err_rad_mean']:.3f} rad"
                 for m, r in rows.items()
             )
-            + f" ({timings[f'shape_{shape}_s']:.1f} s)"
         )
 
     noise, periodicity = {}, {}
-    robust_methods = [m for m in ("stretch", "ccgan", "wcgan") if m in methods]
-    if cfg.robustness and robust_methods:
-        t0 = time.perf_counter()
-        for shape in cfg.shapes:
-            traj = trajectories[shape]
-            p_s, target = traj["pressures_s"], traj["target"]
-            noise[shape], periodicity[shape] = {}, {}
-            for method in robust_methods:
-                res, keep = {}, {}
-                # Every noise level and seed in one batched rollout (one thread each).
-                cmds = []
-                for std in cfg.noise_stds:
-                    for seed in cfg.seeds:
-                        cmd, k = commands_for(method, add_noise(p_s, std, seed), target, seed)
-                        cmds.append(cmd)
-                poses = run_dc(arm_c, np.stack(cmds), k, cfg.backend)
-                poses = poses.reshape(len(cfg.noise_stds), len(cfg.seeds), *poses.shape[1:])
-                for std, poses_std in zip(cfg.noise_stds, poses, strict=True):
-                    res[str(std)] = metrics.tracking_errors(poses_std, target)
-                    keep[std] = poses_std[0]
-                noise[shape][method] = res
-                traj.setdefault("noise", {})[method] = keep
-                # Repetitions of one translator: a sampling translator draws seeds 0..R-1; one
-                # with a model per training seed repeats the first seed's model.
-                trained = method in translators and translators[method].trained_seeds
-                rep_seeds = [cfg.seeds[0]] * cfg.n_repeats if trained else range(cfg.n_repeats)
-                cmds = [commands_for(method, p_s, target, seed)[0] for seed in rep_seeds]
-                k = traj["k"][method]
-                reps = run_dc(arm_c, np.stack(cmds), k, cfg.backend)
-                spread = metrics.repetition_spread_cm(reps)
-                spread.update(metrics.tracking_errors(reps, target))
-                periodicity[shape][method] = spread
-                traj.setdefault("repeats", {})[method] = reps
-        timings["robustness_s"] = time.perf_counter() - t0
-        log(f"noise and periodicity tests: {timings['robustness_s']:.1f} s")
+    for shape in cfg.shapes if robust_methods else ():
+        traj, target = trajectories[shape], targets[shape]
+        noise[shape], periodicity[shape] = {}, {}
+        for method in robust_methods:
+            res, keep = {}, {}
+            for std in cfg.noise_stds:
+                poses_std = np.stack(
+                    [poses_of["noise", shape, method, std, seed] for seed in cfg.seeds]
+                )
+                res[str(std)] = metrics.tracking_errors(poses_std, target)
+                keep[std] = poses_std[0]
+            noise[shape][method] = res
+            traj.setdefault("noise", {})[method] = keep
+            reps = np.stack([poses_of["repeat", shape, method, r] for r in range(cfg.n_repeats)])
+            spread = metrics.repetition_spread_cm(reps)
+            spread.update(metrics.tracking_errors(reps, target))
+            periodicity[shape][method] = spread
+            traj.setdefault("repeats", {})[method] = reps
 
     results = {
         "command": command,
