@@ -236,7 +236,10 @@ def load_translator(method: str, cfg: EvalConfig) -> tuple[Translator | None, st
     path = None
     try:
         if method == "ccgan":
-            path = cfg.ccgan_path
+            # The loader's own default ($CCGAN_TRANSLATOR, then the committed checkpoint), named
+            # here so that the per-seed files beside it are found too.
+            default = getattr(sys.modules.get("ccgan.translator"), "DEFAULT_PATH", None)
+            path = cfg.ccgan_path or os.environ.get("CCGAN_TRANSLATOR") or default
             obj = loader(path=path)
         elif cfg.wcgan_path is not None:
             path = cfg.wcgan_path

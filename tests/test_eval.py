@@ -196,6 +196,22 @@ def test_translator_per_trained_seed(tmp_path):
     assert three[0].trained_seeds == {}
 
 
+def test_default_translator_finds_its_trained_seeds(tmp_path, monkeypatch):
+    """Without --ccgan-path the loader's default checkpoint is used, with its per-seed files."""
+    import shutil
+
+    shipped = Path(__file__).resolve().parent.parent / "results" / "ccgan" / "translator.ckpt"
+    for name in ("translator.ckpt", "translator_seed0.ckpt", "translator_seed1.ckpt"):
+        shutil.copy(shipped, tmp_path / name)
+    monkeypatch.setenv("CCGAN_TRANSLATOR", str(tmp_path / "translator.ckpt"))
+    tr, why = pipeline.load_translator("ccgan", pipeline.EvalConfig(seeds=(0, 1)))
+    assert sorted(tr.trained_seeds) == [0, 1], why
+    monkeypatch.delenv("CCGAN_TRANSLATOR")
+    tr, _ = pipeline.load_translator("ccgan", pipeline.EvalConfig(seeds=(0, 1, 2)))
+    committed = shipped.parent / "translator_seed2.ckpt"
+    assert bool(tr.trained_seeds) == committed.exists()
+
+
 def test_oracle_lowers_the_loss_and_batches_like_one_program(small_xml):
     """Adam through the MJX rollout: better than its start, in the valve range, and two programs
     optimised together get exactly the iterates each gets alone (Adam acts elementwise)."""
