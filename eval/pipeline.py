@@ -23,7 +23,7 @@ Methods:
            are slow, so the oracle optimises (and every method's ratio to it is computed over)
            the first `OracleConfig.horizon_s` seconds only, and the CLI leaves it out on CPU
            unless asked: five 2 s programs at k = 10 (5,000 physics steps each), 10 Adam steps,
-           took 500 s on a 2-core CPU, compile included (results/full/shapes.json); on an H200
+           took 500 s on a 2-core CPU, compile included (results/full at commit 7e006b8); on an H200
            the first step took 98 s and each further one 11.6 s (bench/results/h200/oracle.md).
 """
 
@@ -372,12 +372,18 @@ def add_noise(pressures_bar: np.ndarray, std: float, seed: int) -> np.ndarray:
 
 
 class _InThread:
-    """Runs fn(*args) in a daemon thread (an error elsewhere does not wait for it to finish)."""
+    """Runs fn(*args) in a daemon thread (an error elsewhere does not wait for it to finish).
 
-    def __init__(self, fn, *args):
+    With `background=False` fn runs at once, in the caller's thread.
+    """
+
+    def __init__(self, fn, *args, background: bool = True):
         self._out, self._err = None, None
         self._thread = threading.Thread(target=self._run, args=(fn, args), daemon=True)
-        self._thread.start()
+        if background:
+            self._thread.start()
+        else:
+            self._thread.run()
 
     def _run(self, fn, args):
         try:
@@ -387,7 +393,8 @@ class _InThread:
 
     def result(self):
         """fn's return value; re-raises fn's exception."""
-        self._thread.join()
+        if self._thread.ident is not None:
+            self._thread.join()
         if self._err is not None:
             raise self._err
         return self._out
@@ -500,8 +507,10 @@ def evaluate(cfg: EvalConfig, command: str = "", log=print) -> dict:
     targets = dict(zip(cfg.shapes, target_list, strict=True))
     timings["targets_s"] = time.perf_counter() - t0
 
-    # The oracle runs in a worker thread (JAX releases the GIL) while the translators and the
-    # MuJoCo C rollouts below keep the CPU cores busy; on a GPU machine the two overlap.
+    # On an accelerator the oracle runs in a worker thread (JAX releases the GIL) while the
+    # translators and the MuJoCo C rollouts below keep the CPU cores busy. On a CPU the two
+    # would fight for the same cores (2-core EPYC, the full table: 1048 s overlapped, in
+    # results/full; 915 s one after the other at commit 7e006b8), so there it runs first.
     oracle_future, horizon = None, None
     if "oracle" in methods:
         n_steps = min(t.shape[0] for t in targets.values())
@@ -515,6 +524,7 @@ def evaluate(cfg: EvalConfig, command: str = "", log=print) -> dict:
             np.stack([stretch(programs[s][:horizon], k_stretch) for s in cfg.shapes]),
             k_stretch,
             cfg.oracle,
+            background=jax.default_backend() != "cpu",
         )
 
     # Every method, seed, noise level and repetition of every shape: commands first, then one
@@ -862,7 +872,7 @@ def parse_args(argv: list[str] | None = None) -> EvalConfig:
         methods = list(METHODS)
         if jax.default_backend() == "cpu":
             # Measured on a 2-core CPU: 500 s for 10 Adam steps of five 2 s programs at k = 10
-            # (results/full), which would take the main job past 15 min. Ask with --methods.
+            # (results/full at commit 7e006b8), which would take the main job past 15 min.
             methods.remove("oracle")
             print(
                 "NOTE: oracle left out by default on CPU (MJX gradients: ~8 min more on 2 cores"
