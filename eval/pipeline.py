@@ -718,6 +718,67 @@ def _pair_table(caption: str, table: dict, methods: list, keys: tuple[str, str],
     return lines
 
 
+METHOD_NAMES = {
+    "none": "untranslated",
+    "stretch": "stretch only",
+    "ccgan": "CCGAN-GP",
+    "wcgan": "WCGAN-GP",
+    "oracle": "the oracle",
+}
+
+
+def _span(values) -> str:
+    lo, hi = min(values), max(values)
+    return f"{lo:.2f}" if f"{lo:.2f}" == f"{hi:.2f}" else f"{lo:.2f}-{hi:.2f}"
+
+
+def findings(results: dict) -> list[str]:
+    """Plain statements computed from the results: each learned translator against each other
+    method (on how many shapes its mean X_err is lower, and the X_err ratio), how many shapes it
+    tracks within 1.5x the oracle, and what the largest noise level does to each method.
+
+    Returns:
+      Markdown bullet lines (empty when there is nothing to compare).
+    """
+    table, methods = results["table"], results["methods_run"]
+    names = list(table)
+    out = []
+    for m in ("ccgan", "wcgan"):
+        if m not in methods:
+            continue
+        for base in ("none", "stretch", "ccgan", "wcgan"):
+            if base == m or base not in methods or (m, base) == ("wcgan", "ccgan"):
+                continue
+            ratios = [table[s][m]["x_err_cm_mean"] / table[s][base]["x_err_cm_mean"] for s in names]
+            lower = [s for s, r in zip(names, ratios, strict=True) if r < 1.0]
+            out.append(
+                f"- {METHOD_NAMES[m]} against {METHOD_NAMES[base]}: lower mean X_err on"
+                f" {len(lower)} of {len(names)} shapes ({', '.join(lower) or 'no shape'});"
+                f" X_err ratio {METHOD_NAMES[m]} / {METHOD_NAMES[base]} {_span(ratios)}."
+            )
+        if "oracle" in methods:
+            ratios = [table[s][m]["x_ratio_to_oracle"] for s in names]
+            within = [s for s, r in zip(names, ratios, strict=True) if r <= 1.5]
+            out.append(
+                f"- {METHOD_NAMES[m]} within 1.5x the oracle's X_err (over the oracle's window) on"
+                f" {len(within)} of {len(names)} shapes ({', '.join(within) or 'no shape'});"
+                f" ratio {_span(ratios)}."
+            )
+    noise = results.get("noise") or {}
+    if noise:
+        first = next(iter(noise.values()))
+        top = max(next(iter(first.values())), key=float)
+        for m in first:
+            clean = [table[s][m]["x_err_cm_mean"] for s in noise]
+            noisy = [noise[s][m][top]["x_err_cm_mean"] for s in noise]
+            out.append(
+                f"- Largest noise (std {top}), {METHOD_NAMES[m]}: mean X_err {min(clean):.3f}-"
+                f"{max(clean):.3f} cm clean -> {min(noisy):.3f}-{max(noisy):.3f} cm"
+                f" ({_span([n / c for n, c in zip(noisy, clean, strict=True)])}x)."
+            )
+    return out
+
+
 def markdown_report(results: dict) -> str:
     """The results as markdown: a Table-I-like table, then the robustness tests."""
     table = results["table"]
@@ -781,6 +842,9 @@ def markdown_report(results: dict) -> str:
             ("x_ratio_to_oracle", "phi_ratio_to_oracle"),
             digits=2,
         )
+    found = findings(results)
+    if found:
+        lines += ["", "## Findings", "", *found]
     if results["noise"]:
         lines += [
             "",

@@ -240,3 +240,41 @@ def test_oracle_lowers_the_loss_and_batches_like_one_program(small_xml):
     assert x_err.mean() < stretch_err.mean()
     with pytest.raises(ValueError, match="do not match"):
         pipeline.oracle_commands(arm_c, targets, inits[:, :-1], k, cfg)
+
+
+def test_findings_count_shapes_and_ratios():
+    """The findings section states counts and ratios computed from the table."""
+
+    def row(x, ratio=None):
+        r = {"x_err_cm_mean": x}
+        if ratio is not None:
+            r["x_ratio_to_oracle"] = ratio
+        return r
+
+    results = {
+        "methods_run": ["none", "stretch", "ccgan", "oracle"],
+        "table": {
+            "circle": {"none": row(1.0), "stretch": row(0.2), "ccgan": row(0.1, 1.2)},
+            "kite": {"none": row(0.5), "stretch": row(0.1), "ccgan": row(0.4, 2.0)},
+        },
+        "noise": {
+            "circle": {"ccgan": {"0.1": row(0.2), "0.5": row(0.3)}},
+            "kite": {"ccgan": {"0.1": row(0.5), "0.5": row(0.8)}},
+        },
+    }
+    lines = pipeline.findings(results)
+    assert (
+        "- CCGAN-GP against untranslated: lower mean X_err on 2 of 2 shapes (circle, kite);"
+        " X_err ratio CCGAN-GP / untranslated 0.10-0.80." in lines
+    )
+    assert (
+        "- CCGAN-GP against stretch only: lower mean X_err on 1 of 2 shapes (circle);"
+        " X_err ratio CCGAN-GP / stretch only 0.50-4.00." in lines
+    )
+    assert any("within 1.5x" in x and "1 of 2 shapes (circle)" in x for x in lines)
+    # Largest level 0.5 (not the last key by string order): 0.3 / 0.1 = 3x and 0.8 / 0.4 = 2x.
+    assert (
+        "- Largest noise (std 0.5), CCGAN-GP: mean X_err 0.100-0.400 cm clean -> 0.300-0.800 cm"
+        " (2.00-3.00x)." in lines
+    )
+    assert pipeline.findings({"methods_run": ["none"], "table": {"circle": {}}}) == []
