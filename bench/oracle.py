@@ -20,8 +20,8 @@ import jax
 import numpy as np
 
 import mjx_arm  # (sets the XLA CPU flag before the first JAX computation)
+from bench import run_header
 from eval import pipeline, shapes
-from mjx_arm.machine import cpu_model
 
 
 def time_oracle(arm_s, arm_c, horizon_s: float, n_programs: int, k: int, steps: int) -> dict:
@@ -59,17 +59,8 @@ def main(argv=None) -> None:
     if args.steps < 2:
         parser.error("--steps must be at least 2")
     arm_s, arm_c = mjx_arm.load(domain="source"), mjx_arm.load(domain="constrained")
-    device = jax.devices()[0]
-    command = "python -m bench.oracle " + " ".join(
-        argv if argv is not None else __import__("sys").argv[1:]
-    )
-    report = {
-        "device": f"{device.platform}: {device.device_kind}",
-        "cpu": cpu_model(),
-        "jax": jax.__version__,
-        "command": command,
-        "rows": [],
-    }
+    report = run_header("bench.oracle", argv) | {"rows": []}
+    command = report["command"]
     lines = [
         f"# Oracle cost: Adam steps through the MJX rollout ({report['device']}, {report['cpu']})",
         "",

@@ -26,13 +26,11 @@ import time
 from pathlib import Path
 
 import jax
-import jax.numpy as jnp
 
-from bench.train import babbling_data, synthetic_data, time_epochs
-from ccgan import checkpoint
+from bench import run_header
+from bench.train import babbling_data, forward_c_params, synthetic_data, time_epochs
 from ccgan import train as train_lib
 from ccgan.models import ForwardModel
-from mjx_arm.machine import cpu_model
 
 #: Named scopes of `ccgan.train`'s train step, most specific first.
 PARTS = (
@@ -185,18 +183,8 @@ def main(argv=None) -> None:
     config = train_lib.TrainConfig()
     fwd = ForwardModel()
     data = babbling_data(Path(args.data), config) if args.data else synthetic_data(10, 600, config)
-    fc_params = fwd.init(jax.random.PRNGKey(1), jnp.zeros((1, 1, 6)), jnp.zeros((1, 1, 3)))
-    if args.forward_c:
-        fc_params = checkpoint.load(args.forward_c, target=fc_params)[0]
-    device = jax.devices()[0]
-    report = {
-        "device": f"{device.platform}: {device.device_kind}",
-        "cpu": cpu_model(),
-        "jax": jax.__version__,
-        "command": "python -m bench.profile_step "
-        + " ".join(argv if argv is not None else __import__("sys").argv[1:]),
-        "results": [],
-    }
+    fc_params = forward_c_params(fwd, args.forward_c)
+    report = run_header("bench.profile_step", argv) | {"results": []}
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     lines = [

@@ -23,11 +23,11 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from bench import run_header
 from ccgan import checkpoint
 from ccgan import data as data_lib
 from ccgan import train as train_lib
 from ccgan.models import ForwardModel
-from mjx_arm.machine import cpu_model
 
 #: The paper's training time for one CCGAN-GP (12 h 32 min).
 PAPER_WALL_S = 12 * 3600 + 32 * 60
@@ -42,6 +42,12 @@ def synthetic_data(n_traj: int, samples: int, config: train_lib.TrainConfig, see
         x = np.cumsum(rng.normal(scale=0.01, size=(n_traj, samples, 6)), axis=1)
         arrays += [p, x.astype(np.float32)]
     return data_lib.prepare(*arrays, config.window_length, config.n_val, config.stride)
+
+
+def forward_c_params(fwd: ForwardModel, path: str | None):
+    """F_c parameters: the checkpoint at `path`, else a fresh init (seed 1) of `fwd`."""
+    params = fwd.init(jax.random.PRNGKey(1), jnp.zeros((1, 1, 6)), jnp.zeros((1, 1, 3)))
+    return checkpoint.load(path, target=params)[0] if path else params
 
 
 def babbling_data(folder: Path, config: train_lib.TrainConfig):
@@ -212,17 +218,10 @@ def main(argv=None) -> None:
     else:
         n_traj = 50 + config.n_val if args.paper else args.n_traj
         data = synthetic_data(n_traj, args.samples, config)
-    x0 = jnp.zeros((1, 1, 6))
-    fc_params = fwd.init(jax.random.PRNGKey(1), x0, jnp.zeros((1, 1, 3)))
-    if args.forward_c:
-        fc_params = checkpoint.load(args.forward_c, target=fc_params)[0]
+    fc_params = forward_c_params(fwd, args.forward_c)
     steps = min(data.source.train.shape[0], data.constrained.train.shape[0]) // config.batch_size
-    device = jax.devices()[0]
-    report = {
-        "device": f"{device.platform}: {device.device_kind}",
+    report = run_header("bench.train", argv) | {
         "n_devices": jax.device_count(),
-        "cpu": cpu_model(),
-        "jax": jax.__version__,
         "trajectories_per_domain": n_traj,
         "samples": args.samples,
         "train_windows": int(data.source.train.shape[0]),
@@ -237,8 +236,7 @@ def main(argv=None) -> None:
         f"{n_traj} trajectories x {args.samples} samples per domain ({config.n_val} held out), "
         f"window {config.window_length}, batch {config.batch_size}: {steps} steps per epoch; "
         f"feedback rollout {config.feedback_impl}, {config.feedback_unroll} periods per loop "
-        f"iteration; jax {jax.__version__}. Command: `python -m bench.train "
-        f"{' '.join(argv) if argv is not None else ' '.join(__import__('sys').argv[1:])}`.",
+        f"iteration; jax {jax.__version__}. Command: `{report['command']}`.",
         "",
     ]
     if args.paper:

@@ -93,13 +93,18 @@ class Translator:
         return denormalise_pose(np.asarray(pred[0], np.float64), self.bounds)
 
 
+def translator_path(path: str | os.PathLike | None = None) -> Path:
+    """The file `load_translator(path)` reads: path, else $CCGAN_TRANSLATOR, else DEFAULT_PATH."""
+    return Path(path or os.environ.get("CCGAN_TRANSLATOR", DEFAULT_PATH))
+
+
 def load_translator(path: str | os.PathLike | None = None) -> Translator:
     """Loads a translator written by `ccgan.train` (default: $CCGAN_TRANSLATOR or DEFAULT_PATH).
 
     Raises:
       ccgan.checkpoint.CheckpointError: missing, corrupt, or not a translator file.
     """
-    path = Path(path or os.environ.get("CCGAN_TRANSLATOR", DEFAULT_PATH))
+    path = translator_path(path)
     tree, meta = checkpoint.load(path)
     if meta.get("kind") != "translator":
         raise checkpoint.CheckpointError(f"{path} is not a translator checkpoint")

@@ -236,10 +236,10 @@ def load_translator(method: str, cfg: EvalConfig) -> tuple[Translator | None, st
     path = None
     try:
         if method == "ccgan":
-            # The loader's own default ($CCGAN_TRANSLATOR, then the committed checkpoint), named
-            # here so that the per-seed files beside it are found too.
-            default = getattr(sys.modules.get("ccgan.translator"), "DEFAULT_PATH", None)
-            path = cfg.ccgan_path or os.environ.get("CCGAN_TRANSLATOR") or default
+            from ccgan.translator import translator_path
+
+            # The file the loader reads, named so that the per-seed files beside it are found.
+            path = translator_path(cfg.ccgan_path)
             obj = loader(path=path)
         elif cfg.wcgan_path is not None:
             path = cfg.wcgan_path
@@ -378,12 +378,12 @@ class _InThread:
     """
 
     def __init__(self, fn, *args, background: bool = True):
-        self._out, self._err = None, None
-        self._thread = threading.Thread(target=self._run, args=(fn, args), daemon=True)
+        self._out, self._err, self._thread = None, None, None
         if background:
+            self._thread = threading.Thread(target=self._run, args=(fn, args), daemon=True)
             self._thread.start()
         else:
-            self._thread.run()
+            self._run(fn, args)
 
     def _run(self, fn, args):
         try:
@@ -393,7 +393,7 @@ class _InThread:
 
     def result(self):
         """fn's return value; re-raises fn's exception."""
-        if self._thread.ident is not None:
+        if self._thread is not None:
             self._thread.join()
         if self._err is not None:
             raise self._err
@@ -537,8 +537,7 @@ def evaluate(cfg: EvalConfig, command: str = "", log=print) -> dict:
         keys.append(key)
 
     translated = [m for m in methods if m != "oracle"]
-    robust_methods = [m for m in ("stretch", "ccgan", "wcgan") if m in methods]
-    robust_methods = robust_methods if cfg.robustness else []
+    robust_methods = [m for m in ("stretch", "ccgan", "wcgan") if m in methods and cfg.robustness]
     for shape in cfg.shapes:
         p_s, target = programs[shape], targets[shape]
         for method in translated:
@@ -615,13 +614,10 @@ def evaluate(cfg: EvalConfig, command: str = "", log=print) -> dict:
             seeds = seeds_for(method)
             first = ("table", shape, method, seeds[0])
             cmd, k = commands_of[first]
-            traj["poses"][method], traj["commands"][method], traj["k"][method] = (
-                poses_of[first],
-                cmd,
-                k,
-            )
+            traj["poses"][method], traj["commands"][method] = poses_of[first], cmd
+            traj["k"][method] = k
             poses_all = np.stack([poses_of["table", shape, method, s] for s in seeds])
-            row = _errors_with_ratio(poses_all, target, oracle_summary, horizon or len(target))
+            row = _errors_with_ratio(poses_all, target, oracle_summary, horizon)
             row.update(k=k, n_seeds=len(poses_all))
             row.update(fc_errors(cmd, k, target))
             rows[method] = row
