@@ -268,7 +268,12 @@ def load_translator(method: str, cfg: EvalConfig) -> tuple[Translator | None, st
 
 
 def oracle_commands(
-    arm_c, target_poses: np.ndarray, init_commands: np.ndarray, k: int, cfg: OracleConfig
+    arm_c,
+    target_poses: np.ndarray,
+    init_commands: np.ndarray,
+    k: int,
+    cfg: OracleConfig,
+    held=False,
 ) -> tuple[np.ndarray, dict]:
     """D_c commands that track the targets, optimised through the MJX rollout.
 
@@ -278,6 +283,11 @@ def oracle_commands(
     acts elementwise, so each program's iterates are those of its own optimisation), and each
     program's best iterate is returned.
 
+    A held program keeps one command per source step, held k control periods, as every
+    translator's output is: its gradient is summed over each step's k periods, so from a held
+    start (the stretch program) Adam's iterates are exactly those of Adam on the [T, 3] held
+    commands. A free program has a command per control period.
+
     Args:
       arm_c: the D_c arm.
       target_poses: [T, 6] or [S, T, 6] target poses (m, unit d3).
@@ -285,6 +295,8 @@ def oracle_commands(
         program.
       k: control periods per source step.
       cfg: oracle settings.
+      held: bool, or [S] bools: which programs are held (each init program must then be
+        constant over each source step's k periods).
 
     Returns:
       (commands [T * k, 3] or [S, T * k, 3] bar, info: "loss_history" [steps] or [steps, S]
@@ -302,6 +314,12 @@ def oracle_commands(
         raise ValueError(
             f"targets {targets.shape} and init commands {inits.shape} do not match for k = {k}"
         )
+    held = np.broadcast_to(np.asarray(held, bool), inits.shape[:1])
+    blocks = inits[held].reshape(-1, targets.shape[1], k, inits.shape[-1])
+    if not np.allclose(blocks, blocks[:, :, :1]):
+        raise ValueError(
+            "a held program's init commands must be constant over each step's k periods"
+        )
     lo, hi = arm_c.valve.p_min_bar, arm_c.valve.p_max_bar
     frac = np.clip((inits - lo) / (hi - lo), 0.01, 0.99)
     z0 = jnp.asarray(np.log(frac / (1 - frac)), dtype=jnp.float32)
@@ -309,6 +327,15 @@ def oracle_commands(
     rollout = jax.vmap(arm_c.rollout_fn(), in_axes=(None, 0))
     mjx_model = arm_c.mjx_model
     w = cfg.orientation_weight_cm_per_rad
+    held_mask = jnp.asarray(held)[:, None, None]
+
+    def project(grad):
+        """Held programs' gradients summed over each step's k periods."""
+        per_step = grad.reshape(grad.shape[0], -1, k, grad.shape[-1]).sum(2, keepdims=True)
+        summed = jnp.broadcast_to(
+            per_step, grad.shape[:1] + per_step.shape[1:2] + (k,) + grad.shape[-1:]
+        )
+        return jnp.where(held_mask, summed.reshape(grad.shape), grad)
 
     def commands_of(z):
         return lo + (hi - lo) * jax.nn.sigmoid(z)
@@ -329,6 +356,7 @@ def oracle_commands(
         # The programs are independent: pulling back ones gives each its own gradient.
         loss, pullback = jax.vjp(losses_of, z)
         (grad,) = pullback(jnp.ones_like(loss))
+        grad = project(grad)
         updates, opt_state = opt.update(grad, opt_state, z)
         return optax.apply_updates(z, updates), opt_state, loss
 

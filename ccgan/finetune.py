@@ -1,0 +1,317 @@
+"""Simulator-in-the-loop fine-tuning of a trained G_c through the differentiable MJX rollout.
+
+`ccgan.train` teaches G_c to track through the learned forward model F_c, whose own open-loop
+error (0.19 cm over 60 s on the paper-scale data) is several times the tracking errors that
+separate the methods in `eval/`. Here the feedback loss is taken through the simulator itself:
+
+    D_s program p_s [T, 3] --D_s sim--> target poses x_s [T, 6]
+    G_c(p_s, x_s) -> D_c commands [T, 3], each held k periods --MJX D_c rollout from rest-->
+    every k-th pose x_c [T, 6];   loss = mean(X_err_cm^2) + w^2 mean(phi_err^2)
+
+and only G_c's weights change (Adam, small steps), starting from the trained translator. The
+programs are motor-babbling programs of `window_s` seconds from rest, drawn from their own
+random stream (never the evaluation shapes); their D_s targets come from one MuJoCo C batch.
+Several trained seeds are fine-tuned together (their parameters vmapped over one rollout
+batch). Each seed's best iterate by the tracking error on held-out babbling programs, scored
+in MuJoCo C, is what is written, so a fine-tune that makes things worse writes the original.
+
+The output files are translator checkpoints like `ccgan.train`'s (same generator, F_c, k and
+pose bounds; the fine-tuning settings and history added to their metadata), named
+`translator_seed{s}.ckpt` and `translator.ckpt` (the first seed), for `ccgan.load_translator`
+and `python -m eval.shapes --ccgan-path`.
+
+    python -m ccgan.finetune --translators results/ccgan/translator_seed{0,1,2}.ckpt \\
+        --seeds 0 1 2 --out results/ccgan_sim
+
+Gradients through thousands of MJX physics steps are slow on a CPU: use a GPU for real runs.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import json
+import time
+from pathlib import Path
+
+import numpy as np
+
+import mjx_arm  # noqa: F401  (before jax: sets the XLA CPU flag)
+from ccgan import checkpoint
+from ccgan.data import PRESSURE_DIM, denormalise_pressure, samples
+from ccgan.translator import Translator, load_translator
+
+
+@dataclasses.dataclass(frozen=True)
+class FinetuneConfig:
+    """Settings of a simulator-in-the-loop fine-tune."""
+
+    steps: int = 40
+    """Adam steps."""
+    batch_size: int = 16
+    """Babbling programs per step (shared by every seed)."""
+    window_s: float = 2.0
+    """Length of each program, from rest (s of source time, 10 Hz)."""
+    n_train: int = 256
+    """Training programs (drawn from `babble`'s "finetune" stream)."""
+    n_val: int = 32
+    """Held-out programs that pick each seed's best iterate."""
+    learning_rates: tuple[float, ...] = (1e-4, 3e-4, 1e-3)
+    """Adam step sizes, each run for every seed in the same batch; per seed, the best iterate
+    over all of them (by the held-out error) is kept."""
+    orientation_weight_cm_per_rad: float = 10.0
+    """How many cm of position error one rad of orientation error is worth in the loss."""
+    eval_every: int = 5
+    """Steps between validation scores (and the first and last step)."""
+    seed: int = 0
+    """Seed of the programs and of the batch order."""
+    max_wall_s: float = 0.0
+    """Stop after this many seconds (0: no limit); the best iterate so far is kept."""
+
+    def to_dict(self) -> dict:
+        return dataclasses.asdict(self)
+
+
+def babbling_programs(config: FinetuneConfig, n: int, split: str) -> np.ndarray:
+    """[n, T, 3] babbling programs (bar) of `window_s` seconds, from their own random stream."""
+    from mjx_arm import babble
+
+    bcfg = babble.BabbleConfig(seed=config.seed, duration_s=config.window_s, n_train=n, n_val=0)
+    return babble.make_programs(bcfg, range(n), domain="finetune", split=split)
+
+
+def generator_commands(translator: Translator, g_params, samples_s):
+    """G_c's D_c commands [B, T, 3] (bar, one per source step) for normalised D_s samples
+    [B, T, 9] (`ccgan.data.samples`); differentiable in g_params."""
+    out = translator.generator.apply(g_params, samples_s)
+    return denormalise_pressure(out[..., :PRESSURE_DIM])
+
+
+def tracking_loss(poses, target, w: float):
+    """Per-program loss [B]: mean over time of X_err_cm^2 + w^2 * 2 (1 - cos phi)."""
+    import jax.numpy as jnp
+
+    x_cm2 = jnp.sum((100.0 * (poses[..., :3] - target[..., :3])) ** 2, axis=-1)
+    phi2 = 2.0 * (1.0 - jnp.sum(poses[..., 3:] * target[..., 3:], axis=-1))
+    return jnp.mean(x_cm2 + w**2 * phi2, axis=-1)
+
+
+def x_err_cm_c(arm_c, commands_bar: np.ndarray, k: int, target: np.ndarray) -> float:
+    """Mean X_err (cm) of held commands [B, T, 3] in the MuJoCo C simulator against [B, T, 6]."""
+    poses = arm_c.rollout(np.repeat(commands_bar, k, axis=-2), backend="c")[:, k - 1 :: k]
+    return float(np.linalg.norm(100.0 * (poses[..., :3] - target[..., :3]), axis=-1).mean())
+
+
+def finetune(
+    translators: list[Translator],
+    arm_s,
+    arm_c,
+    config: FinetuneConfig,
+    progress: bool = True,
+    log=print,
+) -> tuple[list[dict], dict]:
+    """Fine-tunes each translator's G_c through the MJX D_c rollout.
+
+    Args:
+      translators: trained translators (the same generator shape and k), one per seed.
+      arm_s, arm_c: the D_s and D_c arms (`mjx_arm.load`).
+      config: fine-tuning settings.
+
+    Returns:
+      (best G_c parameters per translator, history: "members" [M] (seed index, learning rate)
+      for M = seeds x learning rates, "train_loss" [steps, M], "val_x_err_cm" {step: [M]},
+      "best_step" [S] (0: the original was best), "best_learning_rate" [S],
+      "best_val_x_err_cm" [S], "wall_s", "step_wall_s").
+    """
+    import jax
+    import jax.numpy as jnp
+    import optax
+    from tqdm.auto import tqdm
+
+    if not translators:
+        raise ValueError("need at least one translator")
+    k = translators[0].k
+    if any(t.k != k for t in translators):
+        raise ValueError(f"translators disagree on k: {[t.k for t in translators]}")
+    tr = translators[0]
+    w = config.orientation_weight_cm_per_rad
+
+    t0 = time.perf_counter()
+    p_train = babbling_programs(config, config.n_train, "train")
+    p_val = babbling_programs(config, config.n_val, "val")
+    x_train = arm_s.rollout(p_train, backend="c")
+    x_val = arm_s.rollout(p_val, backend="c")
+    log(
+        f"D_s targets: {config.n_train} + {config.n_val} programs of {config.window_s} s"
+        f" ({time.perf_counter() - t0:.1f} s)"
+    )
+
+    rollout = jax.vmap(arm_c.rollout_fn(), in_axes=(None, 0))
+    mjx_model = arm_c.mjx_model
+
+    s_train = samples(p_train, x_train, tr.bounds)
+    s_val = jnp.asarray(samples(p_val, x_val, tr.bounds))
+
+    def loss_one(g_params, s_batch, x_batch):
+        """Mean loss over the batch for one seed's parameters."""
+        commands = generator_commands(tr, g_params, s_batch)
+        poses, ok = rollout(mjx_model, jnp.repeat(commands, k, axis=-2))
+        per_program = tracking_loss(poses[:, k - 1 :: k], x_batch, w)
+        # A diverged rollout (never seen in practice) adds nothing rather than NaN.
+        per_program = jnp.where(ok[:, -1], per_program, 0.0)
+        return per_program.mean()
+
+    # Members: every seed with every learning rate, trained side by side (one vmapped batch).
+    members = [(s, lr) for s in range(len(translators)) for lr in config.learning_rates]
+    opt = optax.inject_hyperparams(optax.adam)(learning_rate=config.learning_rates[0])
+    stacked = jax.tree.map(
+        lambda *x: jnp.stack(x), *[translators[s].g_c_params for s, _ in members]
+    )
+    opt_state = jax.vmap(opt.init)(stacked)
+    opt_state.hyperparams["learning_rate"] = jnp.asarray([lr for _, lr in members], jnp.float32)
+
+    @jax.jit
+    def step(params, opt_state, s_batch, x_batch):
+        loss, grads = jax.vmap(jax.value_and_grad(loss_one), in_axes=(0, None, None))(
+            params, s_batch, x_batch
+        )
+        updates, opt_state = jax.vmap(opt.update)(grads, opt_state, params)
+        return optax.apply_updates(params, updates), opt_state, loss
+
+    @jax.jit
+    def val_commands(params):
+        return jax.vmap(lambda g: generator_commands(tr, g, s_val))(params)
+
+    def validate(params) -> np.ndarray:
+        cmds = np.asarray(val_commands(params), np.float64)
+        return np.array([x_err_cm_c(arm_c, c, k, x_val) for c in cmds])
+
+    best_params = stacked
+    best_err = validate(stacked)
+    best_step = np.zeros(len(members), int)
+    history = {
+        "members": members,
+        "val_x_err_cm": {0: best_err.tolist()},
+        "train_loss": [],
+        "step_wall_s": [],
+    }
+    log(f"validation X_err before fine-tuning (cm): {np.round(best_err, 4).tolist()}")
+    rng = np.random.default_rng(config.seed)
+    params = stacked
+    bar = tqdm(range(1, config.steps + 1), disable=not progress, desc="finetune", unit="step")
+    for i in bar:
+        pick = rng.choice(config.n_train, size=config.batch_size, replace=False)
+        t_step = time.perf_counter()
+        x_batch = jnp.asarray(x_train[pick], jnp.float32)
+        params, opt_state, loss = step(params, opt_state, jnp.asarray(s_train[pick]), x_batch)
+        loss = np.asarray(loss)
+        history["step_wall_s"].append(time.perf_counter() - t_step)
+        history["train_loss"].append(loss.tolist())
+        if not np.isfinite(loss).all():
+            log(f"step {i}: non-finite loss {loss}; stopping, keeping the best iterate")
+            break
+        out_of_time = config.max_wall_s > 0 and time.perf_counter() - t0 > config.max_wall_s
+        if i % config.eval_every == 0 or i == config.steps or out_of_time:
+            err = validate(params)
+            history["val_x_err_cm"][i] = err.tolist()
+            better = err < best_err
+            best_params = jax.tree.map(
+                lambda b, p, mask=better: jnp.where(
+                    mask.reshape((-1,) + (1,) * (p.ndim - 1)), p, b
+                ),
+                best_params,
+                params,
+            )
+            best_err = np.where(better, err, best_err)
+            best_step = np.where(better, i, best_step)
+            bar.set_postfix(loss=float(loss.mean()), val_cm=float(err.mean()))
+        if out_of_time:
+            log(f"stopping after step {i}: max_wall_s = {config.max_wall_s} s reached")
+            break
+    bar.close()
+    # Per seed, the member (learning rate) whose best iterate has the lowest held-out error.
+    pick = [
+        min((m for m, (s, _) in enumerate(members) if s == seed), key=lambda m: best_err[m])
+        for seed in range(len(translators))
+    ]
+    history["steps_run"] = len(history["train_loss"])
+    history["best_step"] = [int(best_step[m]) for m in pick]
+    history["best_learning_rate"] = [members[m][1] for m in pick]
+    history["val_x_err_cm_before"] = [float(history["val_x_err_cm"][0][m]) for m in pick]
+    history["best_val_x_err_cm"] = [float(best_err[m]) for m in pick]
+    history["wall_s"] = time.perf_counter() - t0
+    out = [jax.tree.map(lambda x, m=m: np.asarray(x[m]), best_params) for m in pick]
+    return out, history
+
+
+def save_finetuned(path, source_path, g_c_params, finetune_meta: dict) -> Path:
+    """The source translator file with G_c replaced and `finetune_meta` added to its metadata."""
+    tree, meta = checkpoint.load(source_path)
+    tree = dict(tree) | {"g_c": g_c_params}
+    return checkpoint.save(path, tree, meta | {"finetune": finetune_meta})
+
+
+def main(argv=None) -> None:
+    """CLI: `python -m ccgan.finetune --translators A.ckpt [B.ckpt ...] --out DIR`."""
+    import jax
+
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("--translators", nargs="+", required=True, help="translator checkpoints")
+    p.add_argument("--seeds", type=int, nargs="+", help="seed of each file (default 0, 1, ...)")
+    p.add_argument("--out", required=True, help="output folder")
+    p.add_argument("--domain", default="constrained", help="D_c domain name (mjx_arm.DOMAINS)")
+    for f in dataclasses.fields(FinetuneConfig):
+        flag = "--" + f.name.replace("_", "-")
+        if isinstance(f.default, tuple):
+            p.add_argument(flag, type=float, nargs="+", default=list(f.default))
+        else:
+            p.add_argument(flag, type=type(f.default), default=f.default)
+    a = p.parse_args(argv)
+    seeds = a.seeds if a.seeds is not None else list(range(len(a.translators)))
+    if len(seeds) != len(a.translators):
+        p.error("give one seed per translator file")
+    config = FinetuneConfig(
+        **{
+            f.name: tuple(v) if isinstance(v := getattr(a, f.name), list) else v
+            for f in dataclasses.fields(FinetuneConfig)
+        }
+    )
+    translators = [load_translator(path) for path in a.translators]
+    arm_s, arm_c = mjx_arm.load(domain="source"), mjx_arm.load(domain=a.domain)
+    params, history = finetune(translators, arm_s, arm_c, config)
+    out = Path(a.out)
+    out.mkdir(parents=True, exist_ok=True)
+    from mjx_arm.machine import cpu_model
+
+    dev = jax.devices()[0]
+    run = {
+        "command": "python -m ccgan.finetune "
+        + " ".join(argv if argv is not None else __import__("sys").argv[1:]),
+        "machine": f"{cpu_model()}; JAX device: {dev.platform} ({dev.device_kind})",
+        "config": config.to_dict(),
+        "domain": a.domain,
+        "sources": [str(x) for x in a.translators],
+        "seeds": seeds,
+    }
+    for s_i, (seed, src) in enumerate(zip(seeds, a.translators, strict=True)):
+        meta = run | {
+            "seed": seed,
+            "best_step": history["best_step"][s_i],
+            "best_learning_rate": history["best_learning_rate"][s_i],
+            "val_x_err_cm_before": history["val_x_err_cm_before"][s_i],
+            "val_x_err_cm_best": history["best_val_x_err_cm"][s_i],
+        }
+        names = [f"translator_seed{seed}.ckpt"] + (["translator.ckpt"] if s_i == 0 else [])
+        for name in names:
+            save_finetuned(out / name, src, params[s_i], meta)
+    (out / "finetune.json").write_text(json.dumps(run | {"history": history}, indent=2))
+    before = np.round(history["val_x_err_cm_before"], 4).tolist()
+    print(
+        f"wrote {out}: validation X_err (cm) before {before}"
+        f" -> best {np.round(history['best_val_x_err_cm'], 4).tolist()}"
+        f" at steps {history['best_step']}; {history['wall_s']:.1f} s"
+    )
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,67 @@
+"""Tests of ccgan.finetune: G_c fine-tuned through the MJX rollout (3-segment arm, CPU)."""
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+import mjx_arm  # (before jax)
+from ccgan import checkpoint, finetune, load_translator
+from ccgan.translator import translator_path
+
+
+@pytest.fixture(scope="module")
+def arms():
+    xml = mjx_arm.generate_xml(dataclasses.replace(mjx_arm.ArmParams(), n_segments=3))
+    return mjx_arm.load(xml=xml, domain="source"), mjx_arm.load(xml=xml, domain="constrained")
+
+
+def test_finetune_lowers_the_held_out_error_and_writes_a_translator(arms, tmp_path):
+    arm_s, arm_c = arms
+    shipped = load_translator()
+    config = finetune.FinetuneConfig(
+        steps=4,
+        batch_size=4,
+        window_s=0.5,
+        n_train=8,
+        n_val=4,
+        learning_rates=(1e-3, 10.0),
+        eval_every=2,
+    )
+    params, history = finetune.finetune([shipped], arm_s, arm_c, config, progress=False)
+    assert len(params) == 1 and history["members"] == [(0, 1e-3), (0, 10.0)]
+    assert np.asarray(history["train_loss"]).shape == (4, 2)
+    assert sorted(history["val_x_err_cm"]) == [0, 2, 4]
+    # The kept iterate is better on the held-out programs than the trained translator was,
+    # and it is the one the history names.
+    assert history["best_val_x_err_cm"][0] < history["val_x_err_cm_before"][0]
+    m = history["members"].index((0, history["best_learning_rate"][0]))
+    assert history["best_val_x_err_cm"][0] == history["val_x_err_cm"][history["best_step"][0]][m]
+
+    # Scored again in MuJoCo C from the returned parameters: the same held-out error.
+    tuned = dataclasses.replace(shipped, g_c_params=params[0])
+    p_val = finetune.babbling_programs(config, config.n_val, "val")
+    x_val = arm_s.rollout(p_val, backend="c")
+    cmds = np.stack(
+        [tuned.translate(p, x)[0][:: tuned.k] for p, x in zip(p_val, x_val, strict=True)]
+    )
+    err = finetune.x_err_cm_c(arm_c, cmds, tuned.k, x_val)
+    np.testing.assert_allclose(err, history["best_val_x_err_cm"][0], rtol=1e-4)
+
+    # Written as a translator file: G_c replaced, F_c, k and bounds kept, settings recorded.
+    src = translator_path()
+    path = finetune.save_finetuned(tmp_path / "t.ckpt", src, params[0], {"config": "x"})
+    loaded = load_translator(path)
+    assert loaded.k == shipped.k and loaded.f_c_params is not None
+    np.testing.assert_allclose(loaded.bounds.low, shipped.bounds.low)
+    _, meta = checkpoint.load(path)
+    assert meta["finetune"] == {"config": "x"}
+    out, _ = loaded.translate(p_val[0], x_val[0])
+    np.testing.assert_allclose(out[:: loaded.k], cmds[0], rtol=1e-5, atol=1e-6)
+
+
+def test_finetune_rejects_translators_with_different_k(arms):
+    shipped = load_translator()
+    other = dataclasses.replace(shipped, k=shipped.k + 5)
+    with pytest.raises(ValueError, match="disagree on k"):
+        finetune.finetune([shipped, other], *arms, finetune.FinetuneConfig(steps=1))
