@@ -11,9 +11,17 @@ separate the methods in `eval/`. Here the feedback loss is taken through the sim
 and only G_c's weights change (Adam, small steps), starting from the trained translator. The
 programs are motor-babbling programs of `window_s` seconds from rest, drawn from their own
 random stream (never the evaluation shapes); their D_s targets come from one MuJoCo C batch.
-Several trained seeds are fine-tuned together (their parameters vmapped over one rollout
-batch). Each seed's best iterate by the tracking error on held-out babbling programs, scored
-in MuJoCo C, is what is written, so a fine-tune that makes things worse writes the original.
+
+The simulator's gradient only reaches the first `window_s` seconds of a program; left alone,
+the rest of G_c's behaviour drifts (measured: on the five 60 s shapes the first 2 s improved
+~2x while the whole 60 s got ~1.7x worse). An anchor term keeps G_c's commands after the window
+close to the trained translator's on longer babbling programs (`anchor_s`):
+anchor_weight * mean((G_c - G_c_trained)^2) over normalised pressures, for t >= window.
+
+Several trained seeds are fine-tuned together, each with every learning rate (their parameters
+vmapped over one rollout batch). The held-out score is the mean of the X_err (cm, MuJoCo C) on
+held-out `window_s` programs and on held-out `anchor_s` programs; each seed's best iterate by
+that score is what is written, so a fine-tune that makes things worse writes the original.
 
 The output files are translator checkpoints like `ccgan.train`'s (same generator, F_c, k and
 pose bounds; the fine-tuning settings and history added to their metadata), named
@@ -55,7 +63,14 @@ class FinetuneConfig:
     n_train: int = 256
     """Training programs (drawn from `babble`'s "finetune" stream)."""
     n_val: int = 32
-    """Held-out programs that pick each seed's best iterate."""
+    """Held-out programs of `window_s` (and as many of `anchor_s`) that pick the best iterate."""
+    anchor_s: float = 10.0
+    """Length of the anchor (and long held-out) programs (s)."""
+    n_anchor: int = 32
+    """Anchor programs (all used in every step: G_c alone, no simulation)."""
+    anchor_weights: tuple[float, ...] = (30.0, 300.0)
+    """Weights of the anchor term (cm^2 of tracking loss per unit of mean squared normalised
+    pressure difference; 0 turns it off), each run with every seed and learning rate."""
     learning_rates: tuple[float, ...] = (1e-4, 3e-4, 1e-3)
     """Adam step sizes, each run for every seed in the same batch; per seed, the best iterate
     over all of them (by the held-out error) is kept."""
@@ -72,11 +87,15 @@ class FinetuneConfig:
         return dataclasses.asdict(self)
 
 
-def babbling_programs(config: FinetuneConfig, n: int, split: str) -> np.ndarray:
-    """[n, T, 3] babbling programs (bar) of `window_s` seconds, from their own random stream."""
+def babbling_programs(
+    config: FinetuneConfig, n: int, split: str, duration_s: float | None = None
+) -> np.ndarray:
+    """[n, T, 3] babbling programs (bar) of `duration_s` (default `window_s`) seconds, from
+    their own random stream."""
     from mjx_arm import babble
 
-    bcfg = babble.BabbleConfig(seed=config.seed, duration_s=config.window_s, n_train=n, n_val=0)
+    duration_s = config.window_s if duration_s is None else duration_s
+    bcfg = babble.BabbleConfig(seed=config.seed, duration_s=duration_s, n_train=n, n_val=0)
     return babble.make_programs(bcfg, range(n), domain="finetune", split=split)
 
 
@@ -118,10 +137,12 @@ def finetune(
       config: fine-tuning settings.
 
     Returns:
-      (best G_c parameters per translator, history: "members" [M] (seed index, learning rate)
-      for M = seeds x learning rates, "train_loss" [steps, M], "val_x_err_cm" {step: [M]},
+      (best G_c parameters per translator, history: "members" [M] (seed index, learning
+      rate, anchor weight) for M = seeds x learning rates x anchor weights, "train_loss"
+      [steps, M] (the tracking part, cm^2), "val_x_err_cm" {step: [M]} (held-out score),
+      "val_window_x_err_cm" and "val_long_x_err_cm" [validations, M] (its two parts),
       "best_step" [S] (0: the original was best), "best_learning_rate" [S],
-      "best_val_x_err_cm" [S], "wall_s", "step_wall_s").
+      "best_anchor_weight" [S], "best_val_x_err_cm" [S], "wall_s", "step_wall_s").
     """
     import jax
     import jax.numpy as jnp
@@ -141,60 +162,91 @@ def finetune(
     p_val = babbling_programs(config, config.n_val, "val")
     x_train = arm_s.rollout(p_train, backend="c")
     x_val = arm_s.rollout(p_val, backend="c")
+    p_anchor = babbling_programs(config, config.n_anchor, "anchor", config.anchor_s)
+    p_long = babbling_programs(config, config.n_val, "val_long", config.anchor_s)
+    x_anchor = arm_s.rollout(p_anchor, backend="c")
+    x_long = arm_s.rollout(p_long, backend="c")
     log(
-        f"D_s targets: {config.n_train} + {config.n_val} programs of {config.window_s} s"
+        f"D_s targets: {config.n_train} + {config.n_val} programs of {config.window_s} s,"
+        f" {config.n_anchor} + {config.n_val} of {config.anchor_s} s"
         f" ({time.perf_counter() - t0:.1f} s)"
     )
+    window_steps = p_train.shape[1]
 
     rollout = jax.vmap(arm_c.rollout_fn(), in_axes=(None, 0))
     mjx_model = arm_c.mjx_model
 
     s_train = samples(p_train, x_train, tr.bounds)
     s_val = jnp.asarray(samples(p_val, x_val, tr.bounds))
+    s_anchor = jnp.asarray(samples(p_anchor, x_anchor, tr.bounds))
+    s_long = jnp.asarray(samples(p_long, x_long, tr.bounds))
 
-    def loss_one(g_params, s_batch, x_batch):
-        """Mean loss over the batch for one seed's parameters."""
+    def loss_one(g_params, g_trained, anchor_weight, s_batch, x_batch):
+        """(Total loss, tracking part) for one member's parameters."""
         commands = generator_commands(tr, g_params, s_batch)
         poses, ok = rollout(mjx_model, jnp.repeat(commands, k, axis=-2))
         per_program = tracking_loss(poses[:, k - 1 :: k], x_batch, w)
         # A diverged rollout (never seen in practice) adds nothing rather than NaN.
-        per_program = jnp.where(ok[:, -1], per_program, 0.0)
-        return per_program.mean()
+        tracking = jnp.where(ok[:, -1], per_program, 0.0).mean()
+        after = slice(window_steps, None)
+        drift = (
+            tr.generator.apply(g_params, s_anchor)[:, after, :PRESSURE_DIM]
+            - tr.generator.apply(g_trained, s_anchor)[:, after, :PRESSURE_DIM]
+        )
+        return tracking + anchor_weight * jnp.mean(drift**2), tracking
 
-    # Members: every seed with every learning rate, trained side by side (one vmapped batch).
-    members = [(s, lr) for s in range(len(translators)) for lr in config.learning_rates]
+    # Members: every seed with every learning rate and anchor weight, trained side by side (one
+    # vmapped batch).
+    members = [
+        (s, lr, aw)
+        for s in range(len(translators))
+        for lr in config.learning_rates
+        for aw in config.anchor_weights
+    ]
     opt = optax.inject_hyperparams(optax.adam)(learning_rate=config.learning_rates[0])
     stacked = jax.tree.map(
-        lambda *x: jnp.stack(x), *[translators[s].g_c_params for s, _ in members]
+        lambda *x: jnp.stack(x), *[translators[m[0]].g_c_params for m in members]
     )
     opt_state = jax.vmap(opt.init)(stacked)
-    opt_state.hyperparams["learning_rate"] = jnp.asarray([lr for _, lr in members], jnp.float32)
+    opt_state.hyperparams["learning_rate"] = jnp.asarray([m[1] for m in members], jnp.float32)
+    trained = stacked
+    anchor_weights = jnp.asarray([m[2] for m in members], jnp.float32)
 
     @jax.jit
     def step(params, opt_state, s_batch, x_batch):
-        loss, grads = jax.vmap(jax.value_and_grad(loss_one), in_axes=(0, None, None))(
-            params, s_batch, x_batch
+        grad_fn = jax.value_and_grad(loss_one, has_aux=True)
+        (_, loss), grads = jax.vmap(grad_fn, in_axes=(0, 0, 0, None, None))(
+            params, trained, anchor_weights, s_batch, x_batch
         )
         updates, opt_state = jax.vmap(opt.update)(grads, opt_state, params)
         return optax.apply_updates(params, updates), opt_state, loss
 
     @jax.jit
     def val_commands(params):
-        return jax.vmap(lambda g: generator_commands(tr, g, s_val))(params)
+        short = jax.vmap(lambda g: generator_commands(tr, g, s_val))(params)
+        long = jax.vmap(lambda g: generator_commands(tr, g, s_long))(params)
+        return short, long
 
     def validate(params) -> np.ndarray:
-        cmds = np.asarray(val_commands(params), np.float64)
-        return np.array([x_err_cm_c(arm_c, c, k, x_val) for c in cmds])
+        """[M] held-out score: mean of the window and the long programs' X_err (cm)."""
+        short, long = (np.asarray(c, np.float64) for c in val_commands(params))
+        err_short = np.array([x_err_cm_c(arm_c, c, k, x_val) for c in short])
+        err_long = np.array([x_err_cm_c(arm_c, c, k, x_long) for c in long])
+        history["val_window_x_err_cm"].append(err_short.tolist())
+        history["val_long_x_err_cm"].append(err_long.tolist())
+        return 0.5 * (err_short + err_long)
 
-    best_params = stacked
-    best_err = validate(stacked)
-    best_step = np.zeros(len(members), int)
     history = {
         "members": members,
-        "val_x_err_cm": {0: best_err.tolist()},
+        "val_window_x_err_cm": [],
+        "val_long_x_err_cm": [],
         "train_loss": [],
         "step_wall_s": [],
     }
+    best_params = stacked
+    best_err = validate(stacked)
+    best_step = np.zeros(len(members), int)
+    history["val_x_err_cm"] = {0: best_err.tolist()}
     log(f"validation X_err before fine-tuning (cm): {np.round(best_err, 4).tolist()}")
     rng = np.random.default_rng(config.seed)
     params = stacked
@@ -231,12 +283,13 @@ def finetune(
     bar.close()
     # Per seed, the member (learning rate) whose best iterate has the lowest held-out error.
     pick = [
-        min((m for m, (s, _) in enumerate(members) if s == seed), key=lambda m: best_err[m])
+        min((m for m, member in enumerate(members) if member[0] == seed), key=lambda m: best_err[m])
         for seed in range(len(translators))
     ]
     history["steps_run"] = len(history["train_loss"])
     history["best_step"] = [int(best_step[m]) for m in pick]
     history["best_learning_rate"] = [members[m][1] for m in pick]
+    history["best_anchor_weight"] = [members[m][2] for m in pick]
     history["val_x_err_cm_before"] = [float(history["val_x_err_cm"][0][m]) for m in pick]
     history["best_val_x_err_cm"] = [float(best_err[m]) for m in pick]
     history["wall_s"] = time.perf_counter() - t0
@@ -298,6 +351,7 @@ def main(argv=None) -> None:
             "seed": seed,
             "best_step": history["best_step"][s_i],
             "best_learning_rate": history["best_learning_rate"][s_i],
+            "best_anchor_weight": history["best_anchor_weight"][s_i],
             "val_x_err_cm_before": history["val_x_err_cm_before"][s_i],
             "val_x_err_cm_best": history["best_val_x_err_cm"][s_i],
         }

@@ -14,11 +14,15 @@ Methods:
            EvalConfig.stretch_candidates = {1, 5, 10, ..., 30}: the GAN's set {5, ..., 30} plus 1.
   ccgan    the trained CCGAN-GP translator `ccgan.load_translator(path)` (skipped with a note
            when none is available).
+  ccgan_sim  the CCGAN-GP translator fine-tuned through the MJX simulator (`ccgan.finetune`):
+           results/ccgan_sim/translator.ckpt or --ccgan-sim-path; not in the default methods.
   wcgan    the WCGAN-GP baseline translator: a translator checkpoint given by --wcgan-path or
            found at results/wcgan/translator.ckpt.
-  oracle   D_c commands [T * k, 3] optimised directly through the differentiable MJX rollout with
+  oracle   D_c commands optimised directly through the differentiable MJX rollout with
            optax Adam (k = the stretch k), commands kept in the valve range by a sigmoid, starting
-           from the stretch program; a lower reference for the other methods. All shapes are
+           from the stretch program; a lower reference for the other methods. Like every
+           translator's output, one command per source step held k periods (OracleConfig.held;
+           --oracle-per-period frees every control period). All shapes are
            optimised together (one vmapped rollout). Gradients through thousands of MJX steps
            are slow, so the oracle optimises (and every method's ratio to it is computed over)
            the first `OracleConfig.horizon_s` seconds only, and the CLI leaves it out on CPU
@@ -44,8 +48,14 @@ import numpy as np
 import mjx_arm  # noqa: F401  (before jax: sets the XLA CPU flag)
 from eval import metrics, shapes
 
-METHODS = ("none", "stretch", "ccgan", "wcgan", "oracle")
-TRANSLATOR_METHODS = ("ccgan", "wcgan")
+METHODS = ("none", "stretch", "ccgan", "ccgan_sim", "wcgan", "oracle")
+#: What runs without --methods (the oracle is left out on CPU).
+DEFAULT_METHODS = ("none", "stretch", "ccgan", "wcgan", "oracle")
+TRANSLATOR_METHODS = ("ccgan", "ccgan_sim", "wcgan")
+#: Where the simulator-fine-tuned CCGAN-GP (`ccgan.finetune`) is looked for when no path is given.
+CCGAN_SIM_DEFAULT_PATH = (
+    Path(__file__).resolve().parent.parent / "results" / "ccgan_sim" / "translator.ckpt"
+)
 #: Where the WCGAN-GP baseline's translator checkpoint is looked for when no path is given.
 WCGAN_DEFAULT_PATH = (
     Path(__file__).resolve().parent.parent / "results" / "wcgan" / "translator.ckpt"
@@ -64,6 +74,9 @@ class OracleConfig:
     """Seconds of the source program optimised (None: all of it)."""
     orientation_weight_cm_per_rad: float = 10.0
     """How many cm of position error one rad of orientation error is worth in the loss."""
+    held: bool = True
+    """One command per source step held k periods, the output space of every translator
+    (False: a free command per control period)."""
 
 
 @dataclasses.dataclass(frozen=True)
@@ -102,6 +115,8 @@ class EvalConfig:
     """Checkpoint for ccgan.load_translator (None: the translator's default)."""
     wcgan_path: str | None = None
     """Checkpoint of the WCGAN-GP baseline."""
+    ccgan_sim_path: str | None = None
+    """Checkpoint of the simulator-fine-tuned CCGAN-GP (None: CCGAN_SIM_DEFAULT_PATH)."""
     oracle: OracleConfig = OracleConfig()
     """Oracle settings."""
     video_fps: int = 15
@@ -240,6 +255,9 @@ def load_translator(method: str, cfg: EvalConfig) -> tuple[Translator | None, st
 
             # The file the loader reads, named so that the per-seed files beside it are found.
             path = translator_path(cfg.ccgan_path)
+            obj = loader(path=path)
+        elif method == "ccgan_sim":
+            path = cfg.ccgan_sim_path or CCGAN_SIM_DEFAULT_PATH
             obj = loader(path=path)
         elif cfg.wcgan_path is not None:
             path = cfg.wcgan_path
@@ -552,6 +570,7 @@ def evaluate(cfg: EvalConfig, command: str = "", log=print) -> dict:
             np.stack([stretch(programs[s][:horizon], k_stretch) for s in cfg.shapes]),
             k_stretch,
             cfg.oracle,
+            cfg.oracle.held,
             background=jax.default_backend() != "cpu",
         )
 
@@ -565,7 +584,9 @@ def evaluate(cfg: EvalConfig, command: str = "", log=print) -> dict:
         keys.append(key)
 
     translated = [m for m in methods if m != "oracle"]
-    robust_methods = [m for m in ("stretch", "ccgan", "wcgan") if m in methods and cfg.robustness]
+    robust_methods = [
+        m for m in ("stretch", *TRANSLATOR_METHODS) if m in methods and cfg.robustness
+    ]
     for shape in cfg.shapes:
         p_s, target = programs[shape], targets[shape]
         for method in translated:
@@ -746,6 +767,7 @@ METHOD_NAMES = {
     "none": "untranslated",
     "stretch": "stretch only",
     "ccgan": "CCGAN-GP",
+    "ccgan_sim": "CCGAN-GP + sim fine-tune",
     "wcgan": "WCGAN-GP",
     "oracle": "the oracle",
 }
@@ -767,11 +789,17 @@ def findings(results: dict) -> list[str]:
     table, methods = results["table"], results["methods_run"]
     names = list(table)
     out = []
-    for m in ("ccgan", "wcgan"):
+    for m in TRANSLATOR_METHODS:
         if m not in methods:
             continue
-        for base in ("none", "stretch", "ccgan", "wcgan"):
-            if base == m or base not in methods or (m, base) == ("wcgan", "ccgan"):
+        for base in ("none", "stretch", *TRANSLATOR_METHODS):
+            # The baseline WCGAN-GP only against the simple methods; CCGAN-GP against its
+            # fine-tuned version once (from the fine-tuned side).
+            skip = (m == "wcgan" and base in TRANSLATOR_METHODS) or (m, base) == (
+                "ccgan",
+                "ccgan_sim",
+            )
+            if base == m or base not in methods or skip:
                 continue
             ratios = [table[s][m]["x_err_cm_mean"] / table[s][base]["x_err_cm_mean"] for s in names]
             lower = [s for s, r in zip(names, ratios, strict=True) if r < 1.0]
@@ -858,9 +886,15 @@ def markdown_report(results: dict) -> str:
             digits=3,
         )
     if "oracle" in methods:
+        held = results["config"].get("oracle", {}).get("held", False)
         lines += _pair_table(
             "Ratio to the oracle (mean X_err / oracle mean X_err; mean phi_err / oracle's),"
-            " over the window the oracle optimised:",
+            " over the window the oracle optimised; the oracle's commands were "
+            + (
+                "held k periods per source step, like every translator's:"
+                if held
+                else "free in every control period:"
+            ),
             table,
             methods,
             ("x_ratio_to_oracle", "phi_ratio_to_oracle"),
@@ -945,6 +979,12 @@ def parse_args(argv: list[str] | None = None) -> EvalConfig:
     )
     p.add_argument("--ccgan-path", default=None)
     p.add_argument("--wcgan-path", default=None)
+    p.add_argument("--ccgan-sim-path", default=None)
+    p.add_argument(
+        "--oracle-per-period",
+        action="store_true",
+        help="oracle with a free command per control period (default: held k periods)",
+    )
     p.add_argument("--oracle-steps", type=int, default=OracleConfig.steps)
     p.add_argument(
         "--oracle-horizon",
@@ -957,7 +997,7 @@ def parse_args(argv: list[str] | None = None) -> EvalConfig:
     if methods is None:
         import jax
 
-        methods = list(METHODS)
+        methods = list(DEFAULT_METHODS)
         if jax.default_backend() == "cpu":
             # Measured on a 2-core CPU: 500 s for 10 Adam steps of five 2 s programs at k = 10
             # (results/full at commit 7e006b8), which would take the main job past 15 min.
@@ -978,8 +1018,9 @@ def parse_args(argv: list[str] | None = None) -> EvalConfig:
         out_dir=a.out,
         ccgan_path=a.ccgan_path,
         wcgan_path=a.wcgan_path,
+        ccgan_sim_path=a.ccgan_sim_path,
         target_domain=a.target_domain,
-        oracle=OracleConfig(steps=a.oracle_steps, horizon_s=horizon),
+        oracle=OracleConfig(steps=a.oracle_steps, horizon_s=horizon, held=not a.oracle_per_period),
     )
     if a.quick:
         cfg = dataclasses.replace(

@@ -18,6 +18,7 @@ COLORS = {
     "none": "maroon",
     "stretch": "tab:orange",
     "ccgan": "tab:green",
+    "ccgan_sim": "tab:purple",
     "wcgan": "tab:red",
     "oracle": "black",
 }
@@ -26,6 +27,7 @@ LABELS = {
     "none": "untranslated",
     "stretch": "stretch",
     "ccgan": "CCGAN-GP",
+    "ccgan_sim": "CCGAN-GP + sim",
     "wcgan": "WCGAN-GP",
     "oracle": "oracle",
 }

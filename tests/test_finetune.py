@@ -27,6 +27,8 @@ def test_finetune_lowers_the_held_out_error_and_writes_a_translator(arms, tmp_pa
         n_val=4,
         learning_rates=(1e-3, 10.0),
         eval_every=2,
+        anchor_s=1.0,
+        n_anchor=4,
     )
     params, history = finetune.finetune([shipped], arm_s, arm_c, config, progress=False)
     assert len(params) == 1 and history["members"] == [(0, 1e-3), (0, 10.0)]
