@@ -13,8 +13,9 @@ programs are motor-babbling programs of `window_s` seconds from rest, drawn from
 random stream (never the evaluation shapes); their D_s targets come from one MuJoCo C batch.
 
 The simulator's gradient only reaches the first `window_s` seconds of a program; left alone,
-the rest of G_c's behaviour drifts (measured: on the five 60 s shapes the first 2 s improved
-~2x while the whole 60 s got ~1.7x worse). An anchor term keeps G_c's commands after the window
+the rest of G_c's behaviour drifts (bench/results/cpu/finetune_window.md: without an anchor,
+the five shapes' first 2 s went from 0.10-0.13 to 0.05-0.07 cm X_err, their whole 60 s from
+0.040-0.061 to 0.070-0.092 cm). An anchor term keeps G_c's commands after the window
 close to the trained translator's on longer babbling programs (`anchor_s`):
 anchor_weight * mean((G_c - G_c_trained)^2) over normalised pressures, for t >= window.
 

@@ -240,6 +240,17 @@ def test_oracle_lowers_the_loss_and_batches_like_one_program(small_xml):
     assert x_err.mean() < stretch_err.mean()
     with pytest.raises(ValueError, match="do not match"):
         pipeline.oracle_commands(arm_c, targets, inits[:, :-1], k, cfg)
+    # Held like a translator's output: one command per source step, still better than stretch,
+    # and no better than the free oracle, which can do everything the held one can.
+    held, info_held = pipeline.oracle_commands(arm_c, targets, inits, k, cfg, held=[True, False])
+    blocks = held[0].reshape(n, k, 3)
+    np.testing.assert_allclose(blocks, np.broadcast_to(blocks[:, :1], blocks.shape))
+    assert not np.allclose(both[0].reshape(n, k, 3), both[0].reshape(n, k, 3)[:, :1])
+    np.testing.assert_allclose(held[1], both[1], rtol=1e-5, atol=1e-6)  # free one untouched
+    h = np.asarray(info_held["loss_history"])[:, 0]
+    assert h.min() < h[0]
+    with pytest.raises(ValueError, match="constant over each step"):
+        pipeline.oracle_commands(arm_c, targets, both, k, cfg, held=True)
 
 
 def test_findings_count_shapes_and_ratios():

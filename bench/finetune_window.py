@@ -1,0 +1,67 @@
+"""Tracking error of translator folders on the five shapes: first 2 s from rest and whole 60 s.
+
+Shows what simulator fine-tuning (`ccgan.finetune`) changes where its gradient reaches (the
+first `window` seconds from rest) and after it. For each folder, each trained seed's translator
+(translator_seed{s}.ckpt) runs every shape in the MuJoCo C simulator of D_c; X_err (cm) is
+averaged over seeds.
+
+    PYTHONPATH=. python -m bench.finetune_window results/ccgan results/ccgan_sim_noanchor \\
+        results/ccgan_sim --out bench/results/cpu/finetune_window
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+
+import numpy as np
+
+import mjx_arm
+from bench import run_header
+from ccgan import load_translator
+from eval import metrics, pipeline, shapes
+
+
+def main(argv=None) -> None:
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("folders", nargs="+", help="folders with translator_seed{s}.ckpt")
+    p.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])
+    p.add_argument("--window", type=float, default=2.0, help="seconds from rest")
+    p.add_argument("--out", required=True, help="output prefix (writes .json and .md)")
+    a = p.parse_args(argv)
+    arm_s, arm_c = mjx_arm.load(domain="source"), mjx_arm.load(domain="constrained")
+    head = int(round(a.window * shapes.CONTROL_HZ))
+    rows = {}
+    for name, fn in shapes.SHAPES.items():
+        program = fn(60.0)
+        target = arm_s.rollout(program, backend="c")
+        rows[name] = {}
+        for folder in a.folders:
+            jobs = []
+            for s in a.seeds:
+                tr = load_translator(Path(folder) / f"translator_seed{s}.ckpt")
+                jobs.append(tr.translate(program, target))
+            poses = pipeline.rollout_grouped(arm_c, jobs, "c")
+            err = np.stack([metrics.position_error_cm(x, target) for x in poses])
+            rows[name][folder] = {
+                "x_err_cm_window": float(err[:, :head].mean()),
+                "x_err_cm_60s": float(err.mean()),
+            }
+    header = run_header("bench.finetune_window", argv)
+    result = header | {"window_s": a.window, "seeds": a.seeds, "rows": rows}
+    out = Path(a.out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    out.with_suffix(".json").write_text(json.dumps(result, indent=2))
+    lines = [f"# Translators: X_err (cm), first {a.window:g} s from rest / whole 60 s", ""]
+    lines += [f"- {k}: {v}" for k, v in header.items()]
+    lines += ["", "| shape | " + " | ".join(a.folders) + " |", "|---" * (len(a.folders) + 1) + "|"]
+    for name, r in rows.items():
+        cells = [f"{r[f]['x_err_cm_window']:.4f} / {r[f]['x_err_cm_60s']:.4f}" for f in a.folders]
+        lines.append(f"| {name} | " + " | ".join(cells) + " |")
+    out.with_suffix(".md").write_text("\n".join(lines) + "\n")
+    print("\n".join(lines))
+
+
+if __name__ == "__main__":
+    main()
