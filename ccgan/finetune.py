@@ -40,6 +40,7 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import json
+import sys
 import time
 from pathlib import Path
 
@@ -340,7 +341,7 @@ def main(argv=None) -> None:
     dev = jax.devices()[0]
     run = {
         "command": "python -m ccgan.finetune "
-        + " ".join(argv if argv is not None else __import__("sys").argv[1:]),
+        + " ".join(argv if argv is not None else sys.argv[1:]),
         "machine": f"{cpu_model()}; JAX device: {dev.platform} ({dev.device_kind})",
         "config": config.to_dict(),
         "domain": a.domain,
