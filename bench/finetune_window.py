@@ -32,16 +32,17 @@ def main(argv=None) -> None:
     a = p.parse_args(argv)
     arm_s, arm_c = mjx_arm.load(domain="source"), mjx_arm.load(domain="constrained")
     head = int(round(a.window * shapes.CONTROL_HZ))
+    translators = {
+        folder: [load_translator(Path(folder) / f"translator_seed{s}.ckpt") for s in a.seeds]
+        for folder in a.folders
+    }
     rows = {}
     for name, fn in shapes.SHAPES.items():
         program = fn(60.0)
         target = arm_s.rollout(program, backend="c")
         rows[name] = {}
         for folder in a.folders:
-            jobs = []
-            for s in a.seeds:
-                tr = load_translator(Path(folder) / f"translator_seed{s}.ckpt")
-                jobs.append(tr.translate(program, target))
+            jobs = [tr.translate(program, target) for tr in translators[folder]]
             poses = pipeline.rollout_grouped(arm_c, jobs, "c")
             err = np.stack([metrics.position_error_cm(x, target) for x in poses])
             rows[name][folder] = {

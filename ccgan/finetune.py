@@ -47,7 +47,7 @@ from pathlib import Path
 import numpy as np
 
 import mjx_arm  # noqa: F401  (before jax: sets the XLA CPU flag)
-from ccgan import checkpoint
+from ccgan import checkpoint, losses
 from ccgan.data import PRESSURE_DIM, denormalise_pressure, samples
 from ccgan.translator import Translator, load_translator
 
@@ -108,19 +108,13 @@ def generator_commands(translator: Translator, g_params, samples_s):
     return denormalise_pressure(out[..., :PRESSURE_DIM])
 
 
-def tracking_loss(poses, target, w: float):
-    """Per-program loss [B]: mean over time of X_err_cm^2 + w^2 * 2 (1 - cos phi)."""
-    import jax.numpy as jnp
-
-    x_cm2 = jnp.sum((100.0 * (poses[..., :3] - target[..., :3])) ** 2, axis=-1)
-    phi2 = 2.0 * (1.0 - jnp.sum(poses[..., 3:] * target[..., 3:], axis=-1))
-    return jnp.mean(x_cm2 + w**2 * phi2, axis=-1)
-
-
 def x_err_cm_c(arm_c, commands_bar: np.ndarray, k: int, target: np.ndarray) -> float:
     """Mean X_err (cm) of held commands [B, T, 3] in the MuJoCo C simulator against [B, T, 6]."""
-    poses = arm_c.rollout(np.repeat(commands_bar, k, axis=-2), backend="c")[:, k - 1 :: k]
-    return float(np.linalg.norm(100.0 * (poses[..., :3] - target[..., :3]), axis=-1).mean())
+    from eval.metrics import position_error_cm
+    from eval.pipeline import run_dc, stretch
+
+    poses = run_dc(arm_c, stretch(commands_bar, k), k, "c")
+    return float(position_error_cm(poses, target).mean())
 
 
 def finetune(
@@ -187,7 +181,7 @@ def finetune(
         """(Total loss, tracking part) for one member's parameters."""
         commands = generator_commands(tr, g_params, s_batch)
         poses, ok = rollout(mjx_model, jnp.repeat(commands, k, axis=-2))
-        per_program = tracking_loss(poses[:, k - 1 :: k], x_batch, w)
+        per_program = losses.tracking_loss(poses[:, k - 1 :: k], x_batch, w)
         # A diverged rollout (never seen in practice) adds nothing rather than NaN.
         tracking = jnp.where(ok[:, -1], per_program, 0.0).mean()
         after = slice(window_steps, None)

@@ -99,6 +99,19 @@ def feedback_loss(predicted_pose, target_pose):
     return jnp.mean((predicted_pose - target_pose) ** 2)
 
 
+def tracking_loss(poses_m, target_m, orientation_weight_cm_per_rad: float):
+    """Per-program tracking loss [...]: mean over time of X_err_cm^2 + w^2 * 2 (1 - cos phi).
+
+    Args:
+      poses_m, target_m: [..., T, 6] poses (tip position in m, then the unit d3 director).
+      orientation_weight_cm_per_rad: w, the cm of position error one rad of orientation error
+        is worth (2 (1 - cos phi) ~ phi^2 for small phi).
+    """
+    x_cm2 = jnp.sum((100.0 * (poses_m[..., :3] - target_m[..., :3])) ** 2, axis=-1)
+    phi2 = 2.0 * (1.0 - jnp.sum(poses_m[..., 3:] * target_m[..., 3:], axis=-1))
+    return jnp.mean(x_cm2 + orientation_weight_cm_per_rad**2 * phi2, axis=-1)
+
+
 def position_error_cm(pred_pose_m, target_pose_m):
     """Tip position error ||X_pred - X_target||_2 in cm: [..., 6] x [..., 6] (m) -> [...]."""
     return 100.0 * jnp.linalg.norm(pred_pose_m[..., :3] - target_pose_m[..., :3], axis=-1)

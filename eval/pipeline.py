@@ -325,6 +325,8 @@ def oracle_commands(
     import jax.numpy as jnp
     import optax
 
+    from ccgan.losses import tracking_loss
+
     single = np.ndim(target_poses) == 2
     targets = np.asarray(target_poses)[None] if single else np.asarray(target_poses)
     inits = np.asarray(init_commands)[None] if single else np.asarray(init_commands)
@@ -348,12 +350,9 @@ def oracle_commands(
     held_mask = jnp.asarray(held)[:, None, None]
 
     def project(grad):
-        """Held programs' gradients summed over each step's k periods."""
-        per_step = grad.reshape(grad.shape[0], -1, k, grad.shape[-1]).sum(2, keepdims=True)
-        summed = jnp.broadcast_to(
-            per_step, grad.shape[:1] + per_step.shape[1:2] + (k,) + grad.shape[-1:]
-        )
-        return jnp.where(held_mask, summed.reshape(grad.shape), grad)
+        """Held programs' gradients [S, T * k, 3] summed over each step's k periods."""
+        per_step = grad.reshape(grad.shape[0], -1, k, grad.shape[-1]).sum(2)
+        return jnp.where(held_mask, jnp.repeat(per_step, k, axis=1), grad)
 
     def commands_of(z):
         return lo + (hi - lo) * jax.nn.sigmoid(z)
@@ -361,10 +360,7 @@ def oracle_commands(
     def losses_of(z):
         """[S] loss of each program."""
         poses, ok = rollout(mjx_model, commands_of(z))
-        poses = poses[:, k - 1 :: k]
-        x_cm2 = jnp.sum((100.0 * (poses[..., :3] - target[..., :3])) ** 2, axis=-1)
-        phi2 = 2.0 * (1.0 - jnp.sum(poses[..., 3:] * target[..., 3:], axis=-1))
-        loss = jnp.mean(x_cm2 + w**2 * phi2, axis=-1)
+        loss = tracking_loss(poses[:, k - 1 :: k], target, w)
         return jnp.where(ok[:, -1], loss, jnp.inf)
 
     opt = optax.adam(cfg.learning_rate)
@@ -773,6 +769,15 @@ METHOD_NAMES = {
 }
 
 
+#: Each learned translator and the methods its findings compare it with: the baseline WCGAN-GP
+#: only against the simple methods, CCGAN-GP against its fine-tuned version once (from that side).
+FINDINGS_BASES = {
+    "ccgan": ("none", "stretch", "wcgan"),
+    "ccgan_sim": ("none", "stretch", "ccgan", "wcgan"),
+    "wcgan": ("none", "stretch"),
+}
+
+
 def _span(values) -> str:
     lo, hi = min(values), max(values)
     return f"{lo:.2f}" if f"{lo:.2f}" == f"{hi:.2f}" else f"{lo:.2f}-{hi:.2f}"
@@ -789,18 +794,10 @@ def findings(results: dict) -> list[str]:
     table, methods = results["table"], results["methods_run"]
     names = list(table)
     out = []
-    for m in TRANSLATOR_METHODS:
+    for m, bases in FINDINGS_BASES.items():
         if m not in methods:
             continue
-        for base in ("none", "stretch", *TRANSLATOR_METHODS):
-            # The baseline WCGAN-GP only against the simple methods; CCGAN-GP against its
-            # fine-tuned version once (from the fine-tuned side).
-            skip = (m == "wcgan" and base in TRANSLATOR_METHODS) or (m, base) == (
-                "ccgan",
-                "ccgan_sim",
-            )
-            if base == m or base not in methods or skip:
-                continue
+        for base in (b for b in bases if b in methods):
             ratios = [table[s][m]["x_err_cm_mean"] / table[s][base]["x_err_cm_mean"] for s in names]
             lower = [s for s, r in zip(names, ratios, strict=True) if r < 1.0]
             out.append(

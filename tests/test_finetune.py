@@ -16,7 +16,7 @@ def arms():
     return mjx_arm.load(xml=xml, domain="source"), mjx_arm.load(xml=xml, domain="constrained")
 
 
-def test_finetune_lowers_the_held_out_error_and_writes_a_translator(arms, tmp_path):
+def test_finetune_lowers_the_window_error_and_writes_a_translator(arms, tmp_path):
     arm_s, arm_c = arms
     shipped = load_translator()
     config = finetune.FinetuneConfig(
@@ -76,3 +76,16 @@ def test_finetune_rejects_translators_with_different_k(arms):
     other = dataclasses.replace(shipped, k=shipped.k + 5)
     with pytest.raises(ValueError, match="disagree on k"):
         finetune.finetune([shipped, other], *arms, finetune.FinetuneConfig(steps=1))
+
+
+def test_tracking_loss_by_hand():
+    """1 cm off and 0.1 rad tilted at one of two steps: (1 + 10^2 * 2 (1 - cos 0.1)) / 2."""
+    from ccgan.losses import tracking_loss
+
+    target = np.zeros((2, 6))
+    target[:, 5] = 1.0
+    poses = target.copy()
+    poses[1, 0] = 0.01
+    poses[1, 3:] = [np.sin(0.1), 0.0, np.cos(0.1)]
+    expected = (1.0 + 100.0 * 2.0 * (1.0 - np.cos(0.1))) / 2.0
+    np.testing.assert_allclose(float(tracking_loss(poses, target, 10.0)), expected, rtol=1e-5)
