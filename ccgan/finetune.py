@@ -108,13 +108,18 @@ def generator_commands(translator: Translator, g_params, samples_s):
     return denormalise_pressure(out[..., :PRESSURE_DIM])
 
 
-def x_err_cm_c(arm_c, commands_bar: np.ndarray, k: int, target: np.ndarray) -> float:
-    """Mean X_err (cm) of held commands [B, T, 3] in the MuJoCo C simulator against [B, T, 6]."""
+def x_err_cm_c(arm_c, commands_bar: np.ndarray, k: int, target: np.ndarray):
+    """Mean X_err (cm) of held commands [..., B, T, 3] in the MuJoCo C simulator against the
+    targets [B, T, 6], all in one batched rollout; a float for [B, T, 3], else an array [...]."""
     from eval.metrics import position_error_cm
     from eval.pipeline import run_dc, stretch
 
-    poses = run_dc(arm_c, stretch(commands_bar, k), k, "c")
-    return float(position_error_cm(poses, target).mean())
+    commands_bar = np.asarray(commands_bar)
+    lead = commands_bar.shape[:-3]
+    flat = commands_bar.reshape((-1,) + commands_bar.shape[-2:])
+    poses = run_dc(arm_c, stretch(flat, k), k, "c").reshape(lead + np.shape(target))
+    err = position_error_cm(poses, target).mean(axis=(-2, -1))
+    return float(err) if not lead else err
 
 
 def finetune(
@@ -177,7 +182,7 @@ def finetune(
     s_anchor = jnp.asarray(samples(p_anchor, x_anchor, tr.bounds))
     s_long = jnp.asarray(samples(p_long, x_long, tr.bounds))
 
-    def loss_one(g_params, g_trained, anchor_weight, s_batch, x_batch):
+    def loss_one(g_params, g_trained, anchor_weight, s_anchor, s_batch, x_batch):
         """(Total loss, tracking part) for one member's parameters."""
         commands = generator_commands(tr, g_params, s_batch)
         poses, ok = rollout(mjx_model, jnp.repeat(commands, k, axis=-2))
@@ -208,11 +213,13 @@ def finetune(
     trained = stacked
     anchor_weights = jnp.asarray([m[2] for m in members], jnp.float32)
 
+    # The trained parameters and the anchor data are arguments, not constants folded into the
+    # compiled step, so the persistent compilation cache serves every start point.
     @jax.jit
-    def step(params, opt_state, s_batch, x_batch):
+    def step(params, opt_state, trained, anchor_weights, s_anchor, s_batch, x_batch):
         grad_fn = jax.value_and_grad(loss_one, has_aux=True)
-        (_, loss), grads = jax.vmap(grad_fn, in_axes=(0, 0, 0, None, None))(
-            params, trained, anchor_weights, s_batch, x_batch
+        (_, loss), grads = jax.vmap(grad_fn, in_axes=(0, 0, 0, None, None, None))(
+            params, trained, anchor_weights, s_anchor, s_batch, x_batch
         )
         updates, opt_state = jax.vmap(opt.update)(grads, opt_state, params)
         return optax.apply_updates(params, updates), opt_state, loss
@@ -226,8 +233,8 @@ def finetune(
     def validate(params) -> np.ndarray:
         """[M] held-out score: mean of the window and the long programs' X_err (cm)."""
         short, long = (np.asarray(c, np.float64) for c in val_commands(params))
-        err_short = np.array([x_err_cm_c(arm_c, c, k, x_val) for c in short])
-        err_long = np.array([x_err_cm_c(arm_c, c, k, x_long) for c in long])
+        err_short = x_err_cm_c(arm_c, short, k, x_val)
+        err_long = x_err_cm_c(arm_c, long, k, x_long)
         history["val_window_x_err_cm"].append(err_short.tolist())
         history["val_long_x_err_cm"].append(err_long.tolist())
         return 0.5 * (err_short + err_long)
@@ -251,7 +258,15 @@ def finetune(
         pick = rng.choice(config.n_train, size=config.batch_size, replace=False)
         t_step = time.perf_counter()
         x_batch = jnp.asarray(x_train[pick], jnp.float32)
-        params, opt_state, loss = step(params, opt_state, jnp.asarray(s_train[pick]), x_batch)
+        params, opt_state, loss = step(
+            params,
+            opt_state,
+            trained,
+            anchor_weights,
+            s_anchor,
+            jnp.asarray(s_train[pick]),
+            x_batch,
+        )
         loss = np.asarray(loss)
         history["step_wall_s"].append(time.perf_counter() - t_step)
         history["train_loss"].append(loss.tolist())
@@ -294,10 +309,18 @@ def finetune(
 
 
 def save_finetuned(path, source_path, g_c_params, finetune_meta: dict) -> Path:
-    """The source translator file with G_c replaced and `finetune_meta` added to its metadata."""
+    """The source translator file with G_c replaced and `finetune_meta` added to its metadata.
+
+    A source that was itself fine-tuned keeps its record: the metadata's "finetune" is this
+    stage, "finetune_earlier" lists the earlier stages, oldest first.
+    """
     tree, meta = checkpoint.load(source_path)
     tree = dict(tree) | {"g_c": g_c_params}
-    return checkpoint.save(path, tree, meta | {"finetune": finetune_meta})
+    earlier = list(meta.get("finetune_earlier", [])) + (
+        [meta["finetune"]] if "finetune" in meta else []
+    )
+    stages = {"finetune": finetune_meta} | ({"finetune_earlier": earlier} if earlier else {})
+    return checkpoint.save(path, tree, meta | stages)
 
 
 def main(argv=None) -> None:

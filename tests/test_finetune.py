@@ -66,7 +66,12 @@ def test_finetune_lowers_the_window_error_and_writes_a_translator(arms, tmp_path
     assert loaded.k == shipped.k and loaded.f_c_params is not None
     np.testing.assert_allclose(loaded.bounds.low, shipped.bounds.low)
     _, meta = checkpoint.load(path)
-    assert meta["finetune"] == {"config": "x"}
+    assert meta["finetune"] == {"config": "x"} and "finetune_earlier" not in meta
+    # A second stage from that file keeps the first stage's record.
+    again = finetune.save_finetuned(tmp_path / "t2.ckpt", path, params[0], {"config": "y"})
+    _, meta2 = checkpoint.load(again)
+    assert meta2["finetune"] == {"config": "y"}
+    assert meta2["finetune_earlier"] == [{"config": "x"}]
     out, _ = loaded.translate(first[0], first[1])
     np.testing.assert_allclose(out[:: loaded.k], first[2], rtol=1e-5, atol=1e-6)
 
