@@ -14,8 +14,9 @@ Methods:
            EvalConfig.stretch_candidates = {1, 5, 10, ..., 30}: the GAN's set {5, ..., 30} plus 1.
   ccgan    the trained CCGAN-GP translator `ccgan.load_translator(path)` (skipped with a note
            when none is available).
-  ccgan_sim  the CCGAN-GP translator fine-tuned through the MJX simulator (`ccgan.finetune`):
-           results/ccgan_sim/translator.ckpt or --ccgan-sim-path; not in the default methods.
+  ccgan_sim  the CCGAN-GP translator fine-tuned through the MJX simulator (`ccgan.finetune`,
+           three stages: results/ccgan_sim, ccgan_sim2, ccgan_sim3): the last stage's
+           results/ccgan_sim3/translator.ckpt or --ccgan-sim-path; not in the default methods.
   wcgan    the WCGAN-GP baseline translator: a translator checkpoint given by --wcgan-path or
            found at results/wcgan/translator.ckpt.
   oracle   D_c commands optimised directly through the differentiable MJX rollout with
@@ -54,7 +55,7 @@ DEFAULT_METHODS = ("none", "stretch", "ccgan", "wcgan", "oracle")
 TRANSLATOR_METHODS = ("ccgan", "ccgan_sim", "wcgan")
 #: Where the simulator-fine-tuned CCGAN-GP (`ccgan.finetune`) is looked for when no path is given.
 CCGAN_SIM_DEFAULT_PATH = (
-    Path(__file__).resolve().parent.parent / "results" / "ccgan_sim" / "translator.ckpt"
+    Path(__file__).resolve().parent.parent / "results" / "ccgan_sim3" / "translator.ckpt"
 )
 #: Where the WCGAN-GP baseline's translator checkpoint is looked for when no path is given.
 WCGAN_DEFAULT_PATH = (
@@ -620,6 +621,8 @@ def evaluate(cfg: EvalConfig, command: str = "", log=print) -> dict:
         cmds, info = oracle_future.result()
         timings["oracle_s"] = info["wall_s"]
         timings["oracle_wait_s"] = time.perf_counter() - t0
+        timings["oracle_first_step_s"] = info["step_wall_s"][0] if info["step_wall_s"] else 0.0
+        timings["oracle_step_s_median"] = float(np.median(info["step_wall_s"][1:] or [0.0]))
         history = np.asarray(info["loss_history"]).reshape(cfg.oracle.steps, len(cfg.shapes))
         oracle_poses = rollout_grouped(arm_c, [(c, k_stretch) for c in cmds], cfg.backend)
         for i, shape in enumerate(cfg.shapes):
@@ -628,7 +631,9 @@ def evaluate(cfg: EvalConfig, command: str = "", log=print) -> dict:
         log(
             f"oracle: {len(cfg.shapes)} shapes x {horizon} steps optimised together,"
             f" {cfg.oracle.steps} Adam steps, {timings['oracle_s']:.1f} s"
-            f" (waited {timings['oracle_wait_s']:.1f} s for it after the rollouts)"
+            f" (first step incl. compiling {timings['oracle_first_step_s']:.1f} s, then"
+            f" {timings['oracle_step_s_median']:.1f} s per step;"
+            f" waited {timings['oracle_wait_s']:.1f} s for it after the rollouts)"
         )
 
     table: dict[str, dict] = {}
@@ -883,15 +888,27 @@ def markdown_report(results: dict) -> str:
             digits=3,
         )
     if "oracle" in methods:
-        held = results["config"].get("oracle", {}).get("held", False)
+        oracle_cfg = results["config"].get("oracle", {})
+        held = oracle_cfg.get("held", False)
+        loss_first = [row["oracle"].get("oracle_loss_first") for row in table.values()]
+        loss_best = [row["oracle"].get("oracle_loss_best") for row in table.values()]
+        effort = ""
+        if "steps" in oracle_cfg and None not in loss_first + loss_best:
+            effort = (
+                f" It ran {oracle_cfg['steps']} Adam steps (lr {oracle_cfg['learning_rate']});"
+                f" its loss fell from {min(loss_first):.4f}-{max(loss_first):.4f} to"
+                f" {min(loss_best):.4f}-{max(loss_best):.4f} (cm^2), so a longer optimisation"
+                " may lower it further and raise every ratio."
+            )
         lines += _pair_table(
             "Ratio to the oracle (mean X_err / oracle mean X_err; mean phi_err / oracle's),"
             " over the window the oracle optimised; the oracle's commands were "
             + (
-                "held k periods per source step, like every translator's:"
+                "held k periods per source step, like every translator's."
                 if held
-                else "free in every control period:"
-            ),
+                else "free in every control period."
+            )
+            + effort,
             table,
             methods,
             ("x_ratio_to_oracle", "phi_ratio_to_oracle"),
