@@ -230,14 +230,21 @@ def finetune(
         long = jax.vmap(lambda g: generator_commands(tr, g, s_long))(params)
         return short, long
 
-    def validate(params) -> np.ndarray:
-        """[M] held-out score: mean of the window and the long programs' X_err (cm)."""
+    def validate(params) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """([M] held-out score: the mean of its two parts, [M] window programs' X_err, [M] long
+        programs' X_err), in cm."""
         short, long = (np.asarray(c, np.float64) for c in val_commands(params))
         err_short = x_err_cm_c(arm_c, short, k, x_val)
         err_long = x_err_cm_c(arm_c, long, k, x_long)
+        return 0.5 * (err_short + err_long), err_short, err_long
+
+    def record_validation(step_index: int, params) -> np.ndarray:
+        """Validates, adds the scores to the history and returns the [M] held-out score."""
+        score, err_short, err_long = validate(params)
+        history["val_x_err_cm"][step_index] = score.tolist()
         history["val_window_x_err_cm"].append(err_short.tolist())
         history["val_long_x_err_cm"].append(err_long.tolist())
-        return 0.5 * (err_short + err_long)
+        return score
 
     history = {
         "members": members,
@@ -245,11 +252,11 @@ def finetune(
         "val_long_x_err_cm": [],
         "train_loss": [],
         "step_wall_s": [],
+        "val_x_err_cm": {},
     }
     best_params = stacked
-    best_err = validate(stacked)
+    best_err = record_validation(0, stacked)
     best_step = np.zeros(len(members), int)
-    history["val_x_err_cm"] = {0: best_err.tolist()}
     log(f"validation X_err before fine-tuning (cm): {np.round(best_err, 4).tolist()}")
     rng = np.random.default_rng(config.seed)
     params = stacked
@@ -275,8 +282,7 @@ def finetune(
             break
         out_of_time = config.max_wall_s > 0 and time.perf_counter() - t0 > config.max_wall_s
         if i % config.eval_every == 0 or i == config.steps or out_of_time:
-            err = validate(params)
-            history["val_x_err_cm"][i] = err.tolist()
+            err = record_validation(i, params)
             better = err < best_err
             best_params = jax.tree.map(
                 lambda b, p, mask=better: jnp.where(
