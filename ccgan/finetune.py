@@ -21,8 +21,11 @@ anchor_weight * mean((G_c - G_c_trained)^2) over normalised pressures, for t >= 
 
 Several trained seeds are fine-tuned together, each with every learning rate (their parameters
 vmapped over one rollout batch). The held-out score is the mean of the X_err (cm, MuJoCo C) on
-held-out `window_s` programs and on held-out `anchor_s` programs; each seed's best iterate by
-that score is what is written, so a fine-tune that makes things worse writes the original.
+held-out `window_s` programs and on held-out long programs (`val_long_s`, default `anchor_s`);
+each seed's best iterate by that score is what is written, so a fine-tune that makes things
+worse writes the original. A weak anchor can trade the long programs for the window
+(bench/results/cpu/finetune_window.md): long held-out programs of the evaluation's length
+(`--val-long-s 60`) let the score see that trade.
 
 The output files are translator checkpoints like `ccgan.train`'s (same generator, F_c, k and
 pose bounds; the fine-tuning settings and history added to their metadata), named
@@ -65,9 +68,11 @@ class FinetuneConfig:
     n_train: int = 256
     """Training programs (drawn from `babble`'s "finetune" stream)."""
     n_val: int = 32
-    """Held-out programs of `window_s` (and as many of `anchor_s`) that pick the best iterate."""
+    """Held-out programs of `window_s` (and as many long ones) that pick the best iterate."""
     anchor_s: float = 10.0
-    """Length of the anchor (and long held-out) programs (s)."""
+    """Length of the anchor programs (s)."""
+    val_long_s: float = 0.0
+    """Length of the long held-out programs (s); 0: `anchor_s`."""
     n_anchor: int = 32
     """Anchor programs (all used in every step: G_c alone, no simulation)."""
     anchor_weights: tuple[float, ...] = (30.0, 300.0)
@@ -163,13 +168,14 @@ def finetune(
     p_val = babbling_programs(config, config.n_val, "val")
     x_train = arm_s.rollout(p_train, backend="c")
     x_val = arm_s.rollout(p_val, backend="c")
+    long_s = config.val_long_s or config.anchor_s
     p_anchor = babbling_programs(config, config.n_anchor, "anchor", config.anchor_s)
-    p_long = babbling_programs(config, config.n_val, "val_long", config.anchor_s)
+    p_long = babbling_programs(config, config.n_val, "val_long", long_s)
     x_anchor = arm_s.rollout(p_anchor, backend="c")
     x_long = arm_s.rollout(p_long, backend="c")
     log(
         f"D_s targets: {config.n_train} + {config.n_val} programs of {config.window_s} s,"
-        f" {config.n_anchor} + {config.n_val} of {config.anchor_s} s"
+        f" {config.n_anchor} of {config.anchor_s} s, {config.n_val} of {long_s} s"
         f" ({time.perf_counter() - t0:.1f} s)"
     )
     window_steps = p_train.shape[1]

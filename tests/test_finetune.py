@@ -30,6 +30,7 @@ def test_finetune_lowers_the_window_error_and_writes_a_translator(arms, tmp_path
         eval_every=2,
         anchor_s=1.0,
         n_anchor=4,
+        val_long_s=1.5,
     )
     params, history = finetune.finetune([shipped], arm_s, arm_c, config, progress=False)
     assert len(params) == 1 and history["members"] == [(0, 1e-3, 0.0), (0, 10.0, 0.0)]
@@ -49,14 +50,18 @@ def test_finetune_lowers_the_window_error_and_writes_a_translator(arms, tmp_path
     # of the window programs' and the long programs' X_err.
     tuned = dataclasses.replace(shipped, g_c_params=params[0])
     errs, first = [], None
-    for split, duration in (("val", None), ("val_long", config.anchor_s)):
+    for split, duration in (("val", None), ("val_long", config.val_long_s)):
         p_val = finetune.babbling_programs(config, config.n_val, split, duration)
         x_val = arm_s.rollout(p_val, backend="c")
         pairs = zip(p_val, x_val, strict=True)
         cmds = np.stack([tuned.translate(p, x)[0][:: tuned.k] for p, x in pairs])
         errs.append(finetune.x_err_cm_c(arm_c, cmds, tuned.k, x_val))
+        # Several members' commands [M, B, T, 3] in one batch: one score per member.
+        both = finetune.x_err_cm_c(arm_c, np.stack([cmds, cmds[::-1]]), tuned.k, x_val)
+        assert both.shape == (2,)
+        np.testing.assert_allclose(both[0], errs[-1], rtol=1e-12)
         first = first or (p_val[0], x_val[0], cmds[0])
-    assert p_val.shape[1] == round(10 * config.anchor_s)
+    assert p_val.shape[1] == round(10 * config.val_long_s)
     np.testing.assert_allclose(np.mean(errs), history["best_val_x_err_cm"][0], rtol=1e-4)
 
     # Written as a translator file: G_c replaced, F_c, k and bounds kept, settings recorded.
