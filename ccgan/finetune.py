@@ -24,8 +24,9 @@ vmapped over one rollout batch). The held-out score is the mean of the X_err (cm
 held-out `window_s` programs and on held-out long programs (`val_long_s`, default `anchor_s`);
 each seed's best iterate by that score is what is written, so a fine-tune that makes things
 worse writes the original. A weak anchor can trade the long programs for the window
-(bench/results/cpu/finetune_window.md): long held-out programs of the evaluation's length
-(`--val-long-s 60`) let the score see that trade.
+(bench/results/cpu/finetune_window.md: stages 2-3 improved the 10 s held-out programs while the
+shapes' 60 s error rose); `--val-long-s 60` scores on programs of the evaluation's length
+instead, at six times the validation rollouts.
 
 The output files are translator checkpoints like `ccgan.train`'s (same generator, F_c, k and
 pose bounds; the fine-tuning settings and history added to their metadata), named
