@@ -135,6 +135,7 @@ def finetune(
     config: FinetuneConfig,
     progress: bool = True,
     log=print,
+    on_validation=None,
 ) -> tuple[list[dict], dict]:
     """Fine-tunes each translator's G_c through the MJX D_c rollout.
 
@@ -142,6 +143,9 @@ def finetune(
       translators: trained translators (the same generator shape and k), one per seed.
       arm_s, arm_c: the D_s and D_c arms (`mjx_arm.load`).
       config: fine-tuning settings.
+      on_validation: optional callable(best parameters per translator, history), called after
+        every validation with the best iterates so far (e.g. to write them, so that a run that
+        is killed keeps its progress); the history then has "complete": False.
 
     Returns:
       (best G_c parameters per translator, history: "members" [M] (seed index, learning
@@ -260,11 +264,31 @@ def finetune(
         "train_loss": [],
         "step_wall_s": [],
         "val_x_err_cm": {},
+        "complete": False,
     }
     best_params = stacked
     best_err = record_validation(0, stacked)
     best_step = np.zeros(len(members), int)
     log(f"validation X_err before fine-tuning (cm): {np.round(best_err, 4).tolist()}")
+
+    def best_so_far() -> list[dict]:
+        """Per seed, the best iterate of the member (learning rate, anchor weight) with the
+        lowest held-out score so far; fills the history's summary fields."""
+        pick = [
+            min(
+                (m for m, member in enumerate(members) if member[0] == s), key=lambda m: best_err[m]
+            )
+            for s in range(len(translators))
+        ]
+        history["steps_run"] = len(history["train_loss"])
+        history["best_step"] = [int(best_step[m]) for m in pick]
+        history["best_learning_rate"] = [members[m][1] for m in pick]
+        history["best_anchor_weight"] = [members[m][2] for m in pick]
+        history["val_x_err_cm_before"] = [float(history["val_x_err_cm"][0][m]) for m in pick]
+        history["best_val_x_err_cm"] = [float(best_err[m]) for m in pick]
+        history["wall_s"] = time.perf_counter() - t0
+        return [jax.tree.map(lambda x, m=m: np.asarray(x[m]), best_params) for m in pick]
+
     rng = np.random.default_rng(config.seed)
     params = stacked
     bar = tqdm(range(1, config.steps + 1), disable=not progress, desc="finetune", unit="step")
@@ -301,24 +325,14 @@ def finetune(
             best_err = np.where(better, err, best_err)
             best_step = np.where(better, i, best_step)
             bar.set_postfix(loss=float(loss.mean()), val_cm=float(err.mean()))
+            if on_validation is not None:
+                on_validation(best_so_far(), history)
         if out_of_time:
             log(f"stopping after step {i}: max_wall_s = {config.max_wall_s} s reached")
             break
     bar.close()
-    # Per seed, the member (learning rate) whose best iterate has the lowest held-out error.
-    pick = [
-        min((m for m, member in enumerate(members) if member[0] == seed), key=lambda m: best_err[m])
-        for seed in range(len(translators))
-    ]
-    history["steps_run"] = len(history["train_loss"])
-    history["best_step"] = [int(best_step[m]) for m in pick]
-    history["best_learning_rate"] = [members[m][1] for m in pick]
-    history["best_anchor_weight"] = [members[m][2] for m in pick]
-    history["val_x_err_cm_before"] = [float(history["val_x_err_cm"][0][m]) for m in pick]
-    history["best_val_x_err_cm"] = [float(best_err[m]) for m in pick]
-    history["wall_s"] = time.perf_counter() - t0
-    out = [jax.tree.map(lambda x, m=m: np.asarray(x[m]), best_params) for m in pick]
-    return out, history
+    history["complete"] = True
+    return best_so_far(), history
 
 
 def save_finetuned(path, source_path, g_c_params, finetune_meta: dict) -> Path:
@@ -363,7 +377,6 @@ def main(argv=None) -> None:
     )
     translators = [load_translator(path) for path in a.translators]
     arm_s, arm_c = mjx_arm.load(domain="source"), mjx_arm.load(domain=a.domain)
-    params, history = finetune(translators, arm_s, arm_c, config)
     out = Path(a.out)
     out.mkdir(parents=True, exist_ok=True)
     from mjx_arm.machine import cpu_model
@@ -378,19 +391,29 @@ def main(argv=None) -> None:
         "sources": [str(x) for x in a.translators],
         "seeds": seeds,
     }
-    for s_i, (seed, src) in enumerate(zip(seeds, a.translators, strict=True)):
-        meta = run | {
-            "seed": seed,
-            "best_step": history["best_step"][s_i],
-            "best_learning_rate": history["best_learning_rate"][s_i],
-            "best_anchor_weight": history["best_anchor_weight"][s_i],
-            "val_x_err_cm_before": history["val_x_err_cm_before"][s_i],
-            "val_x_err_cm_best": history["best_val_x_err_cm"][s_i],
-        }
-        names = [f"translator_seed{seed}.ckpt"] + (["translator.ckpt"] if s_i == 0 else [])
-        for name in names:
-            save_finetuned(out / name, src, params[s_i], meta)
-    (out / "finetune.json").write_text(json.dumps(run | {"history": history}, indent=2))
+
+    def write(params, history) -> None:
+        """The best translators so far and the history (atomically; rewritten at every
+        validation, so a killed run keeps its progress)."""
+        for s_i, (seed, src) in enumerate(zip(seeds, a.translators, strict=True)):
+            meta = run | {
+                "seed": seed,
+                "complete": history["complete"],
+                "best_step": history["best_step"][s_i],
+                "best_learning_rate": history["best_learning_rate"][s_i],
+                "best_anchor_weight": history["best_anchor_weight"][s_i],
+                "val_x_err_cm_before": history["val_x_err_cm_before"][s_i],
+                "val_x_err_cm_best": history["best_val_x_err_cm"][s_i],
+            }
+            names = [f"translator_seed{seed}.ckpt"] + (["translator.ckpt"] if s_i == 0 else [])
+            for name in names:
+                save_finetuned(out / name, src, params[s_i], meta)
+        tmp = out / "finetune.json.tmp"
+        tmp.write_text(json.dumps(run | {"history": history}, indent=2))
+        tmp.replace(out / "finetune.json")
+
+    params, history = finetune(translators, arm_s, arm_c, config, on_validation=write)
+    write(params, history)
     before = np.round(history["val_x_err_cm_before"], 4).tolist()
     print(
         f"wrote {out}: validation X_err (cm) before {before}"

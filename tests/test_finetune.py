@@ -2,10 +2,11 @@
 
 import dataclasses
 
+import jax
 import numpy as np
 import pytest
 
-import mjx_arm  # (before jax)
+import mjx_arm
 from ccgan import checkpoint, finetune, load_translator
 from ccgan.translator import translator_path
 
@@ -32,7 +33,20 @@ def test_finetune_lowers_the_window_error_and_writes_a_translator(arms, tmp_path
         n_anchor=4,
         val_long_s=1.5,
     )
-    params, history = finetune.finetune([shipped], arm_s, arm_c, config, progress=False)
+    reports = []
+
+    def on_validation(best, hist):
+        reports.append((hist["complete"], list(hist["best_step"]), best[0]))
+
+    params, history = finetune.finetune(
+        [shipped], arm_s, arm_c, config, progress=False, on_validation=on_validation
+    )
+    # The best iterates so far were reported after every validation but the first (steps 2, 4),
+    # the last report being the returned result.
+    assert [r[0] for r in reports] == [False, False] and history["complete"]
+    assert reports[-1][1] == history["best_step"]
+    for got, want in zip(jax.tree.leaves(reports[-1][2]), jax.tree.leaves(params[0]), strict=True):
+        np.testing.assert_array_equal(got, want)
     assert len(params) == 1 and history["members"] == [(0, 1e-3, 0.0), (0, 10.0, 0.0)]
     assert np.asarray(history["train_loss"]).shape == (4, 2)
     assert sorted(history["val_x_err_cm"]) == [0, 2, 4]
