@@ -626,8 +626,8 @@ def evaluate(cfg: EvalConfig, command: str = "", log=print) -> dict:
         history = np.asarray(info["loss_history"]).reshape(cfg.oracle.steps, len(cfg.shapes))
         oracle_poses = rollout_grouped(arm_c, [(c, k_stretch) for c in cmds], cfg.backend)
         for i, shape in enumerate(cfg.shapes):
-            first = float(history[0, i]) if cfg.oracle.steps else None
-            oracle_out[shape] = (cmds[i], oracle_poses[i], first, info["best_loss"][i])
+            losses = [float(v) for v in history[:, i]]
+            oracle_out[shape] = (cmds[i], oracle_poses[i], losses, info["best_loss"][i])
         log(
             f"oracle: {len(cfg.shapes)} shapes x {horizon} steps optimised together,"
             f" {cfg.oracle.steps} Adam steps, {timings['oracle_s']:.1f} s"
@@ -644,14 +644,15 @@ def evaluate(cfg: EvalConfig, command: str = "", log=print) -> dict:
         rows = {}
         oracle_summary = None
         if shape in oracle_out:
-            cmd, poses_o, loss_first, loss_best = oracle_out[shape]
+            cmd, poses_o, loss_history, loss_best = oracle_out[shape]
             row = metrics.tracking_errors(poses_o, target[:horizon])
             oracle_summary = {"x": row["x_err_cm_mean"], "phi": row["phi_err_rad_mean"]}
             row.update(
                 k=k_stretch,
                 window_steps=horizon,
-                oracle_loss_first=loss_first,
+                oracle_loss_first=loss_history[0] if loss_history else None,
                 oracle_loss_best=loss_best,
+                oracle_loss_history=loss_history,
             )
             row["x_err_cm_mean_oracle_window"] = row["x_err_cm_mean"]
             row["phi_err_rad_mean_oracle_window"] = row["phi_err_rad_mean"]
