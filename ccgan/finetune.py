@@ -335,19 +335,25 @@ def finetune(
     return best_so_far(), history
 
 
-def save_finetuned(path, source_path, g_c_params, finetune_meta: dict) -> Path:
-    """The source translator file with G_c replaced and `finetune_meta` added to its metadata.
+def finetuned_checkpoint(source: tuple[dict, dict], g_c_params, finetune_meta: dict):
+    """(tree, meta) of a source translator checkpoint (`checkpoint.load`'s pair) with G_c
+    replaced and `finetune_meta` added to its metadata.
 
     A source that was itself fine-tuned keeps its record: the metadata's "finetune" is this
     stage, "finetune_earlier" lists the earlier stages, oldest first.
     """
-    tree, meta = checkpoint.load(source_path)
-    tree = dict(tree) | {"g_c": g_c_params}
+    tree, meta = source
     earlier = list(meta.get("finetune_earlier", [])) + (
         [meta["finetune"]] if "finetune" in meta else []
     )
     stages = {"finetune": finetune_meta} | ({"finetune_earlier": earlier} if earlier else {})
-    return checkpoint.save(path, tree, meta | stages)
+    return dict(tree) | {"g_c": g_c_params}, meta | stages
+
+
+def save_finetuned(path, source_path, g_c_params, finetune_meta: dict) -> Path:
+    """Writes `finetuned_checkpoint` of the translator file at `source_path` to `path`."""
+    tree, meta = finetuned_checkpoint(checkpoint.load(source_path), g_c_params, finetune_meta)
+    return checkpoint.save(path, tree, meta)
 
 
 def main(argv=None) -> None:
@@ -376,6 +382,7 @@ def main(argv=None) -> None:
         }
     )
     translators = [load_translator(path) for path in a.translators]
+    sources = [checkpoint.load(path) for path in a.translators]  # read once, rewritten often
     arm_s, arm_c = mjx_arm.load(domain="source"), mjx_arm.load(domain=a.domain)
     out = Path(a.out)
     out.mkdir(parents=True, exist_ok=True)
@@ -395,7 +402,7 @@ def main(argv=None) -> None:
     def write(params, history) -> None:
         """The best translators so far and the history (atomically; rewritten at every
         validation, so a killed run keeps its progress)."""
-        for s_i, (seed, src) in enumerate(zip(seeds, a.translators, strict=True)):
+        for s_i, (seed, source) in enumerate(zip(seeds, sources, strict=True)):
             meta = run | {
                 "seed": seed,
                 "complete": history["complete"],
@@ -405,9 +412,10 @@ def main(argv=None) -> None:
                 "val_x_err_cm_before": history["val_x_err_cm_before"][s_i],
                 "val_x_err_cm_best": history["best_val_x_err_cm"][s_i],
             }
+            tree, file_meta = finetuned_checkpoint(source, params[s_i], meta)
             names = [f"translator_seed{seed}.ckpt"] + (["translator.ckpt"] if s_i == 0 else [])
             for name in names:
-                save_finetuned(out / name, src, params[s_i], meta)
+                checkpoint.save(out / name, tree, file_meta)
         tmp = out / "finetune.json.tmp"
         tmp.write_text(json.dumps(run | {"history": history}, indent=2))
         tmp.replace(out / "finetune.json")
