@@ -55,11 +55,18 @@ from ccgan import checkpoint, losses
 from ccgan.data import PRESSURE_DIM, denormalise_pressure, samples
 from ccgan.translator import Translator, load_translator
 
+#: Program families a fine-tune can draw from (`FinetuneConfig.programs`).
+PROGRAM_FAMILIES = ("babble", "shape_like")
+
 
 @dataclasses.dataclass(frozen=True)
 class FinetuneConfig:
     """Settings of a simulator-in-the-loop fine-tune."""
 
+    programs: str = "babble"
+    """Program family of every training, anchor and held-out program: "babble" (motor
+    babbling, `mjx_arm.babble`) or "shape_like" (`eval.shapes.shape_like_program`: random
+    ellipses, polygons, staircases and phase jumps like the test shapes, never one of them)."""
     steps: int = 40
     """Adam steps."""
     batch_size: int = 16
@@ -67,7 +74,7 @@ class FinetuneConfig:
     window_s: float = 2.0
     """Length of each program, from rest (s of source time, 10 Hz)."""
     n_train: int = 256
-    """Training programs (drawn from `babble`'s "finetune" stream)."""
+    """Training programs (each family's "finetune" stream)."""
     n_val: int = 32
     """Held-out programs of `window_s` (and as many long ones) that pick the best iterate."""
     anchor_s: float = 10.0
@@ -91,18 +98,26 @@ class FinetuneConfig:
     max_wall_s: float = 0.0
     """Stop after this many seconds (0: no limit); the best iterate so far is kept."""
 
+    def __post_init__(self):
+        if self.programs not in PROGRAM_FAMILIES:
+            raise ValueError(f"programs must be one of {PROGRAM_FAMILIES}, got {self.programs!r}")
+
     def to_dict(self) -> dict:
         return dataclasses.asdict(self)
 
 
-def babbling_programs(
+def training_programs(
     config: FinetuneConfig, n: int, split: str, duration_s: float | None = None
 ) -> np.ndarray:
-    """[n, T, 3] babbling programs (bar) of `duration_s` (default `window_s`) seconds, from
-    their own random stream."""
+    """[n, T, 3] programs (bar) of `config.programs`' family and `duration_s` (default
+    `window_s`) seconds, from the split's own random stream."""
+    duration_s = config.window_s if duration_s is None else duration_s
+    if config.programs == "shape_like":
+        from eval.shapes import shape_like_programs
+
+        return shape_like_programs(n, duration_s, seed=config.seed, split=f"finetune/{split}")
     from mjx_arm import babble
 
-    duration_s = config.window_s if duration_s is None else duration_s
     bcfg = babble.BabbleConfig(seed=config.seed, duration_s=duration_s, n_train=n, n_val=0)
     return babble.make_programs(bcfg, range(n), domain="finetune", split=split)
 
@@ -169,13 +184,13 @@ def finetune(
     w = config.orientation_weight_cm_per_rad
 
     t0 = time.perf_counter()
-    p_train = babbling_programs(config, config.n_train, "train")
-    p_val = babbling_programs(config, config.n_val, "val")
+    p_train = training_programs(config, config.n_train, "train")
+    p_val = training_programs(config, config.n_val, "val")
     x_train = arm_s.rollout(p_train, backend="c")
     x_val = arm_s.rollout(p_val, backend="c")
     long_s = config.val_long_s or config.anchor_s
-    p_anchor = babbling_programs(config, config.n_anchor, "anchor", config.anchor_s)
-    p_long = babbling_programs(config, config.n_val, "val_long", long_s)
+    p_anchor = training_programs(config, config.n_anchor, "anchor", config.anchor_s)
+    p_long = training_programs(config, config.n_val, "val_long", long_s)
     x_anchor = arm_s.rollout(p_anchor, backend="c")
     x_long = arm_s.rollout(p_long, backend="c")
     log(
@@ -370,7 +385,8 @@ def main(argv=None) -> None:
         if isinstance(f.default, tuple):
             p.add_argument(flag, type=float, nargs="+", default=list(f.default))
         else:
-            p.add_argument(flag, type=type(f.default), default=f.default)
+            choices = PROGRAM_FAMILIES if f.name == "programs" else None
+            p.add_argument(flag, type=type(f.default), default=f.default, choices=choices)
     a = p.parse_args(argv)
     seeds = a.seeds if a.seeds is not None else list(range(len(a.translators)))
     if len(seeds) != len(a.translators):

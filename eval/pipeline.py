@@ -15,8 +15,9 @@ Methods:
   ccgan    the trained CCGAN-GP translator `ccgan.load_translator(path)` (skipped with a note
            when none is available).
   ccgan_sim  the CCGAN-GP translator fine-tuned through the MJX simulator (`ccgan.finetune`,
-           three stages: results/ccgan_sim, ccgan_sim2, ccgan_sim3): the last stage's
-           results/ccgan_sim3/translator.ckpt or --ccgan-sim-path; not in the default methods.
+           five stages: results/ccgan_sim, ccgan_sim2, ccgan_sim3 on babbling programs,
+           ccgan_sim4, ccgan_sim5 on shape-like ones): the last stage's
+           results/ccgan_sim5/translator.ckpt or --ccgan-sim-path; not in the default methods.
   wcgan    the WCGAN-GP baseline translator: a translator checkpoint given by --wcgan-path or
            found at results/wcgan/translator.ckpt.
   oracle   D_c commands optimised directly through the differentiable MJX rollout with
@@ -55,7 +56,7 @@ DEFAULT_METHODS = ("none", "stretch", "ccgan", "wcgan", "oracle")
 TRANSLATOR_METHODS = ("ccgan", "ccgan_sim", "wcgan")
 #: Where the simulator-fine-tuned CCGAN-GP (`ccgan.finetune`) is looked for when no path is given.
 CCGAN_SIM_DEFAULT_PATH = (
-    Path(__file__).resolve().parent.parent / "results" / "ccgan_sim3" / "translator.ckpt"
+    Path(__file__).resolve().parent.parent / "results" / "ccgan_sim5" / "translator.ckpt"
 )
 #: Where the WCGAN-GP baseline's translator checkpoint is looked for when no path is given.
 WCGAN_DEFAULT_PATH = (

@@ -24,6 +24,7 @@ Run `python -m eval.shapes --help` for the evaluation CLI (this module's `main`)
 from __future__ import annotations
 
 import math
+import zlib
 from collections.abc import Callable
 
 import numpy as np
@@ -153,6 +154,73 @@ def validation_program(duration_s: float = 20.0, seed: int = 1234) -> np.ndarray
             )
     bend /= max(1.0, np.linalg.norm(bend, axis=-1).max())
     return pressures_from_bend(bend)
+
+
+#: Kinds of `shape_like_program`.
+SHAPE_LIKE_KINDS = ("ellipse", "polygon", "staircase", "phase_jumps")
+
+
+def shape_like_program(rng: np.random.Generator, duration_s: float) -> np.ndarray:
+    """One random program [T, 3] (bar, float32) of the shapes' signal types, never a test shape.
+
+    The bending vector follows a random closed path at a random lap period, from a random phase:
+      ellipse      sinusoids: an ellipse of random axes and tilt, half of them under a decaying
+                   envelope exp(-t / tau), tau in [20, 120] s (spirals)
+      polygon      ramps at constant speed along a random polygon of 3-6 vertices
+      staircase    the polygon path sampled and held every 0.5-3 s
+      phase_jumps  a circle of random radius whose phase jumps 1-3 times by up to +-180 deg
+    Lap periods are uniform in [10, 60] s, direction either way. Half of the programs add a
+    common-mode offset m in [-0.3, 0.3] (all three chambers up or down); the path is scaled so
+    |m| + |b| <= 1, which keeps every command in P_MID +- AMPLITUDE, inside the valve range.
+
+    Used to fine-tune and validate translators on programs like the test shapes (slow, smooth
+    or stepped, starting away from rest) without ever using the five shapes themselves.
+    """
+    t = times_s(duration_s)
+    kind = SHAPE_LIKE_KINDS[rng.integers(len(SHAPE_LIKE_KINDS))]
+    period_s = rng.uniform(10.0, 60.0)
+    laps = rng.choice([-1.0, 1.0]) * t / period_s + rng.uniform(0.0, 1.0)
+    if kind == "ellipse":
+        a = rng.uniform(0.3, 1.0)
+        b = a * rng.uniform(0.0, 1.0)
+        tilt = rng.uniform(0.0, math.pi)
+        w = 2.0 * math.pi * laps
+        local = np.stack([a * np.cos(w), b * np.sin(w)], axis=-1)
+        rot = np.array([[math.cos(tilt), -math.sin(tilt)], [math.sin(tilt), math.cos(tilt)]])
+        bend = local @ rot.T
+        if rng.uniform() < 0.5:
+            bend *= np.exp(-t / rng.uniform(20.0, 120.0))[:, None]
+    elif kind in ("polygon", "staircase"):
+        n = int(rng.integers(3, 7))
+        gaps = rng.uniform(0.5, 1.5, size=n)
+        angles = rng.uniform(0.0, 2.0 * math.pi) + 2.0 * math.pi * np.cumsum(gaps) / gaps.sum()
+        radii = rng.uniform(0.4, 1.0, size=n)
+        vertices = radii[:, None] * np.stack([np.cos(angles), np.sin(angles)], axis=-1)
+        if kind == "staircase":
+            step_s = rng.uniform(0.5, 3.0)
+            held = np.floor(t / step_s) * step_s
+            laps = np.interp(held, t, laps)
+        bend = _polygon_path(vertices, laps)
+    else:
+        jumps = np.sort(rng.uniform(0.0, t[-1] + 1e-9, size=int(rng.integers(1, 4))))
+        shift = rng.uniform(-0.5, 0.5, size=jumps.size)
+        phase = laps + np.array([shift[jumps <= ti].sum() for ti in t])
+        w = 2.0 * math.pi * phase
+        bend = rng.uniform(0.3, 1.0) * np.stack([np.cos(w), np.sin(w)], axis=-1)
+    offset = rng.uniform(-0.3, 0.3) if rng.uniform() < 0.5 else 0.0
+    bend *= (1.0 - abs(offset)) / max(1.0, np.linalg.norm(bend, axis=-1).max())
+    return (pressures_from_bend(bend) + AMPLITUDE_BAR * offset).astype(np.float32)
+
+
+def shape_like_programs(
+    n: int, duration_s: float, seed: int = 0, split: str = "train"
+) -> np.ndarray:
+    """[n, T, 3] `shape_like_program`s (bar, float32); program i of a split draws from
+    ``np.random.default_rng([seed, crc32("shape_like/" + split), i])``, whatever n is."""
+    stream = zlib.crc32(f"shape_like/{split}".encode()) & 0x7FFFFFFF
+    return np.stack(
+        [shape_like_program(np.random.default_rng([seed, stream, i]), duration_s) for i in range(n)]
+    )
 
 
 #: Shape name -> program function(duration_s=60.0) -> [T, 3] commands (bar).

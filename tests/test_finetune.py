@@ -65,7 +65,7 @@ def test_finetune_lowers_the_window_error_and_writes_a_translator(arms, tmp_path
     tuned = dataclasses.replace(shipped, g_c_params=params[0])
     errs, first = [], None
     for split, duration in (("val", None), ("val_long", config.val_long_s)):
-        p_val = finetune.babbling_programs(config, config.n_val, split, duration)
+        p_val = finetune.training_programs(config, config.n_val, split, duration)
         x_val = arm_s.rollout(p_val, backend="c")
         pairs = zip(p_val, x_val, strict=True)
         cmds = np.stack([tuned.translate(p, x)[0][:: tuned.k] for p, x in pairs])
