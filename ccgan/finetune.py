@@ -9,14 +9,16 @@ separate the methods in `eval/`. Here the feedback loss is taken through the sim
     every k-th pose x_c [T, 6];   loss = mean(X_err_cm^2) + w^2 mean(phi_err^2)
 
 and only G_c's weights change (Adam, small steps), starting from the trained translator. The
-programs are motor-babbling programs of `window_s` seconds from rest, drawn from their own
-random stream (never the evaluation shapes); their D_s targets come from one MuJoCo C batch.
+programs are `window_s` seconds from rest, drawn from their own random stream, never the
+evaluation shapes: motor-babbling programs (`programs="babble"`) or random programs of the
+shapes' signal types (`programs="shape_like"`, `eval.shapes.shape_like_program`: ellipses,
+spirals, polygons, staircases, phase jumps); their D_s targets come from one MuJoCo C batch.
 
 The simulator's gradient only reaches the first `window_s` seconds of a program; left alone,
 the rest of G_c's behaviour drifts (bench/results/cpu/finetune_window.md: without an anchor,
 the five shapes' first 2 s went from 0.10-0.13 to 0.05-0.07 cm X_err, their whole 60 s from
 0.040-0.061 to 0.070-0.092 cm). An anchor term keeps G_c's commands after the window
-close to the trained translator's on longer babbling programs (`anchor_s`):
+close to the trained translator's on longer programs (`anchor_s`):
 anchor_weight * mean((G_c - G_c_trained)^2) over normalised pressures, for t >= window.
 
 Several trained seeds are fine-tuned together, each with every learning rate (their parameters
@@ -26,7 +28,9 @@ each seed's best iterate by that score is what is written, so a fine-tune that m
 worse writes the original. A weak anchor can trade the long programs for the window
 (bench/results/cpu/finetune_window.md: stages 2-3 improved the 10 s held-out programs while the
 shapes' 60 s error rose); `--val-long-s 60` scores on programs of the evaluation's length
-instead, at six times the validation rollouts.
+instead, at six times the validation rollouts. Babbling programs do not stand for the shapes' slow
+periodic programs; with `--programs shape_like` every training, anchor and held-out program
+is shape-like (README: stages 4-5).
 
 The output files are translator checkpoints like `ccgan.train`'s (same generator, F_c, k and
 pose bounds; the fine-tuning settings and history added to their metadata), named
@@ -397,13 +401,14 @@ def main(argv=None) -> None:
             for f in dataclasses.fields(FinetuneConfig)
         }
     )
+    from mjx_arm.machine import cpu_model, enable_compilation_cache
+
+    enable_compilation_cache()
     translators = [load_translator(path) for path in a.translators]
     sources = [checkpoint.load(path) for path in a.translators]  # read once, rewritten often
     arm_s, arm_c = mjx_arm.load(domain="source"), mjx_arm.load(domain=a.domain)
     out = Path(a.out)
     out.mkdir(parents=True, exist_ok=True)
-    from mjx_arm.machine import cpu_model
-
     dev = jax.devices()[0]
     run = {
         "command": "python -m ccgan.finetune "

@@ -50,6 +50,28 @@ def test_damped_circle_shrinks():
     assert np.ptp(p[-300:], axis=0).max() < 0.6 * np.ptp(p[:300], axis=0).max()
 
 
+def test_shape_like_programs_in_range_reproducible_and_never_a_test_shape():
+    p = shapes.shape_like_programs(64, 60.0, seed=3, split="train")
+    assert p.shape == (64, 600, 3) and p.dtype == np.float32 and np.isfinite(p).all()
+    lo, hi = shapes.P_MID_BAR - shapes.AMPLITUDE_BAR, shapes.P_MID_BAR + shapes.AMPLITUDE_BAR
+    assert p.min() >= lo - 1e-5 and p.max() <= hi + 1e-5
+    # Program i does not depend on how many are drawn; other seeds and splits differ.
+    np.testing.assert_array_equal(shapes.shape_like_programs(5, 60.0, seed=3)[:], p[:5])
+    assert not np.allclose(shapes.shape_like_programs(5, 60.0, seed=4), p[:5])
+    assert not np.allclose(shapes.shape_like_programs(5, 60.0, seed=3, split="val"), p[:5])
+    # Every program moves, and at least one is a staircase (holds for >= 5 steps at a time)
+    # and one is smooth (changes at every step).
+    assert (np.ptp(p, axis=1).max(axis=-1) > 0.05).all()
+    changes = np.abs(np.diff(p, axis=1)).max(axis=-1) > 1e-6  # [64, 599]
+    assert (changes.mean(axis=1) < 0.2).any() and changes.all(axis=1).any()
+    # Some add a common-mode offset (the mean pressure leaves P_MID), some do not.
+    mean_offset = np.abs(p.mean(axis=2) - shapes.P_MID_BAR).max(axis=1)
+    assert (mean_offset > 0.1).any() and (mean_offset < 1e-4).any()
+    # None is one of the five test shapes.
+    for fn in shapes.SHAPES.values():
+        assert np.abs(p - fn(60.0)[None]).max(axis=(1, 2)).min() > 0.1
+
+
 def test_position_error_by_hand():
     pred = np.array([[0.0, 0.0, 0.0, 0, 0, 1], [0.03, 0.04, 0.0, 0, 0, 1]])
     target = np.zeros((2, 6))

@@ -102,6 +102,19 @@ def test_finetune_rejects_translators_with_different_k(arms):
         finetune.finetune([shipped, other], *arms, finetune.FinetuneConfig(steps=1))
 
 
+def test_finetune_program_families():
+    from eval.shapes import shape_like_programs
+
+    config = finetune.FinetuneConfig(programs="shape_like", window_s=1.0, seed=2)
+    got = finetune.training_programs(config, 3, "val")
+    np.testing.assert_array_equal(got, shape_like_programs(3, 1.0, seed=2, split="finetune/val"))
+    assert finetune.training_programs(config, 2, "anchor", 5.0).shape == (2, 50, 3)
+    babble = finetune.training_programs(dataclasses.replace(config, programs="babble"), 3, "val")
+    assert babble.shape == got.shape and not np.allclose(babble, got)
+    with pytest.raises(ValueError, match="programs must be one of"):
+        finetune.FinetuneConfig(programs="shapes")
+
+
 def test_tracking_loss_by_hand():
     """1 cm off and 0.1 rad tilted at one of two steps: (1 + 10^2 * 2 (1 - cos 0.1)) / 2."""
     from ccgan.losses import tracking_loss
