@@ -647,6 +647,9 @@ def main(argv=None) -> None:
             typ = {"int": int, "float": float}.get(str(f.type), type(f.default))
             parser.add_argument(flag, type=typ, default=f.default)
     args = parser.parse_args(argv)
+    from mjx_arm.machine import enable_compilation_cache
+
+    enable_compilation_cache()
     config = TrainConfig(
         **{
             f.name: tuple(getattr(args, f.name))

@@ -1051,7 +1051,10 @@ def parse_args(argv: list[str] | None = None) -> EvalConfig:
 
 def main(argv: list[str] | None = None) -> dict:
     """Thin entry point: parse flags, evaluate, print the wall time."""
+    from mjx_arm.machine import enable_compilation_cache
+
     cfg = parse_args(argv)
+    enable_compilation_cache()
     command = "python -m eval.shapes " + " ".join(sys.argv[1:] if argv is None else argv)
     t0 = time.perf_counter()
     results = evaluate(cfg, command=command.strip())

@@ -56,7 +56,7 @@ from jax.sharding import Mesh, NamedSharding
 from jax.sharding import PartitionSpec as P
 
 from mjx_arm import arm as arm_lib
-from mjx_arm import constants, dataset
+from mjx_arm import constants, dataset, machine
 
 BACKENDS = ("auto", "mjx", "c")
 #: Largest MuJoCo C batch per call: `mujoco.rollout` returns every substep's full state
@@ -473,7 +473,11 @@ def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
     p.add_argument("--model", help="MJCF path (default: models/softarm.xml)")
     p.add_argument("--out", default="out/babble", help="output folder")
     p.add_argument("--distributed", action="store_true", help="call jax.distributed.initialize()")
-    p.add_argument("--cache-dir", help="JAX persistent compilation cache folder")
+    p.add_argument(
+        "--cache-dir",
+        help="JAX persistent compilation cache folder (default on an accelerator:"
+        " ~/.cache/softarm/jax, see mjx_arm.machine.enable_compilation_cache)",
+    )
     p.add_argument("--no-progress", action="store_true")
     return p.parse_args(argv)
 
@@ -507,6 +511,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         jax.distributed.initialize()
     if args.cache_dir:
         jax.config.update("jax_compilation_cache_dir", args.cache_dir)
+    else:
+        machine.enable_compilation_cache()
     config = config_from_args(args)
     start = time.perf_counter()
     paths = run(config, args.out, model_path=args.model, progress=not args.no_progress)

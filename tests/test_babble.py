@@ -281,3 +281,26 @@ def test_domain_flag_takes_both_or_a_list():
         babble.parse_args(["--preset", "paper", "--domain", "source,aged"])
     )
     assert aged.domains == ("source", "aged") and aged.n_train == 50
+
+
+def test_compilation_cache_is_on_for_accelerators_only(monkeypatch, tmp_path):
+    from mjx_arm import machine
+
+    before = jax.config.jax_compilation_cache_dir
+    monkeypatch.delenv(machine.CACHE_ENV, raising=False)
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path))
+    assert jax.default_backend() == "cpu"
+    assert machine.enable_compilation_cache() is None
+    assert jax.config.jax_compilation_cache_dir == before
+    monkeypatch.setattr(jax, "default_backend", lambda: "gpu")
+    try:
+        want = str(tmp_path / "softarm" / "jax")
+        assert machine.enable_compilation_cache() == want
+        assert jax.config.jax_compilation_cache_dir == want
+        # A folder set in the environment is JAX's own business: returned, config untouched.
+        jax.config.update("jax_compilation_cache_dir", before)
+        monkeypatch.setenv(machine.CACHE_ENV, "/elsewhere")
+        assert machine.enable_compilation_cache() == "/elsewhere"
+        assert jax.config.jax_compilation_cache_dir == before
+    finally:
+        jax.config.update("jax_compilation_cache_dir", before)
