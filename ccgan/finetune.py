@@ -57,7 +57,7 @@ import numpy as np
 import mjx_arm  # noqa: F401  (before jax: sets the XLA CPU flag)
 from ccgan import checkpoint, losses
 from ccgan.data import PRESSURE_DIM, denormalise_pressure, samples
-from ccgan.translator import Translator, load_translator
+from ccgan.translator import Translator, translator_from_checkpoint
 
 #: Program families a fine-tune can draw from (`FinetuneConfig.programs`).
 PROGRAM_FAMILIES = ("babble", "shape_like")
@@ -404,8 +404,10 @@ def main(argv=None) -> None:
     from mjx_arm.machine import cpu_model, enable_compilation_cache
 
     enable_compilation_cache()
-    translators = [load_translator(path) for path in a.translators]
-    sources = [checkpoint.load(path) for path in a.translators]  # read once, rewritten often
+    sources = [checkpoint.load(p) for p in a.translators]  # read once, rewritten often
+    translators = [
+        translator_from_checkpoint(src, p) for src, p in zip(sources, a.translators, strict=True)
+    ]
     arm_s, arm_c = mjx_arm.load(domain="source"), mjx_arm.load(domain=a.domain)
     out = Path(a.out)
     out.mkdir(parents=True, exist_ok=True)

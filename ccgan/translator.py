@@ -105,7 +105,16 @@ def load_translator(path: str | os.PathLike | None = None) -> Translator:
       ccgan.checkpoint.CheckpointError: missing, corrupt, or not a translator file.
     """
     path = translator_path(path)
-    tree, meta = checkpoint.load(path)
+    return translator_from_checkpoint(checkpoint.load(path), path)
+
+
+def translator_from_checkpoint(source: tuple[dict, dict], path="checkpoint") -> Translator:
+    """The translator of a loaded translator file (`checkpoint.load`'s (tree, meta) pair).
+
+    Raises:
+      ccgan.checkpoint.CheckpointError: not a translator file (`path` names it in the message).
+    """
+    tree, meta = source
     if meta.get("kind") != "translator":
         raise checkpoint.CheckpointError(f"{path} is not a translator checkpoint")
     fwd = ForwardModel(**meta["forward"])

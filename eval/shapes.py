@@ -204,7 +204,7 @@ def shape_like_program(rng: np.random.Generator, duration_s: float) -> np.ndarra
     else:
         jumps = np.sort(rng.uniform(0.0, t[-1] + 1e-9, size=int(rng.integers(1, 4))))
         shift = rng.uniform(-0.5, 0.5, size=jumps.size)
-        phase = laps + np.array([shift[jumps <= ti].sum() for ti in t])
+        phase = laps + np.where(jumps[None, :] <= t[:, None], shift[None, :], 0.0).sum(axis=1)
         w = 2.0 * math.pi * phase
         bend = rng.uniform(0.3, 1.0) * np.stack([np.cos(w), np.sin(w)], axis=-1)
     offset = rng.uniform(-0.3, 0.3) if rng.uniform() < 0.5 else 0.0

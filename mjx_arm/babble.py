@@ -509,10 +509,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = parse_args(argv)
     if args.distributed:
         jax.distributed.initialize()
-    if args.cache_dir:
-        jax.config.update("jax_compilation_cache_dir", args.cache_dir)
-    else:
-        machine.enable_compilation_cache()
+    machine.enable_compilation_cache(args.cache_dir or None)
     config = config_from_args(args)
     start = time.perf_counter()
     paths = run(config, args.out, model_path=args.model, progress=not args.no_progress)

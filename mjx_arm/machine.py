@@ -25,21 +25,24 @@ def enable_compilation_cache(path: str | os.PathLike | None = None) -> str | Non
 
     The command-line tools call this before their first compilation, so that a second run on the
     same kind of GPU reads its compiled programs from disk instead of compiling again (the oracle's
-    Adam step on an H200: 165 s compiling, 60 s from the cache; README, "The full table"). Left
-    alone (returns None) on the CPU, where compiling is fast and the tests run, and where
-    `JAX_COMPILATION_CACHE_DIR` is set (JAX reads it itself; it is returned).
+    Adam step on an H200: 165 s compiling, 60 s from the cache; README, "The full table"). Without
+    `path`, left alone (returns None) on the CPU, where compiling is fast and the tests run, and
+    where `JAX_COMPILATION_CACHE_DIR` is set (JAX reads it itself; it is returned).
 
     Args:
-      path: cache folder (default: $XDG_CACHE_HOME/softarm/jax, else ~/.cache/softarm/jax).
+      path: cache folder, used on any backend (e.g. `mjx_arm.babble --cache-dir`); default on an
+        accelerator: $XDG_CACHE_HOME/softarm/jax, else ~/.cache/softarm/jax.
     """
     import jax
 
+    if path is not None:
+        jax.config.update("jax_compilation_cache_dir", str(path))
+        return str(path)
     if os.environ.get(CACHE_ENV):
         return os.environ[CACHE_ENV]
     if jax.default_backend() == "cpu":
         return None
-    if path is None:
-        base = os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache"
-        path = Path(base) / "softarm" / "jax"
+    base = os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache"
+    path = Path(base) / "softarm" / "jax"
     jax.config.update("jax_compilation_cache_dir", str(path))
     return str(path)

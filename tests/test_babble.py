@@ -302,5 +302,9 @@ def test_compilation_cache_is_on_for_accelerators_only(monkeypatch, tmp_path):
         monkeypatch.setenv(machine.CACHE_ENV, "/elsewhere")
         assert machine.enable_compilation_cache() == "/elsewhere"
         assert jax.config.jax_compilation_cache_dir == before
+        # A folder given explicitly (`mjx_arm.babble --cache-dir`) applies on any backend.
+        monkeypatch.setattr(jax, "default_backend", lambda: "cpu")
+        assert machine.enable_compilation_cache(tmp_path / "mine") == str(tmp_path / "mine")
+        assert jax.config.jax_compilation_cache_dir == str(tmp_path / "mine")
     finally:
         jax.config.update("jax_compilation_cache_dir", before)
