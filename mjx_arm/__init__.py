@@ -40,6 +40,7 @@ with _contextlib.redirect_stdout(_io.StringIO()):
 from mjx_arm.arm import (  # noqa: E402
     Arm,
     ModelValidationError,
+    SimState,
     SimulationDivergedError,
     check_pressures,
     load,
@@ -76,6 +77,7 @@ __all__ = [
     "P_MAX_BAR",
     "P_MIN_BAR",
     "SOURCE",
+    "SimState",
     "SimulationDivergedError",
     "TIP_SITE",
     "check_pressures",

@@ -14,6 +14,7 @@ import hashlib
 import math
 import os
 from pathlib import Path
+from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
@@ -28,6 +29,15 @@ from mjx_arm import constants, domains, valve
 POSE_DIM = 6
 #: A trajectory whose joint speed exceeds this (rad/s or m/s) is treated as diverged.
 MAX_JOINT_SPEED = 1.0e3
+
+
+class SimState(NamedTuple):
+    """Batched MuJoCo C simulation states between control periods."""
+
+    physics: np.ndarray
+    """[B, nstate] MuJoCo full-physics states (`mjSTATE_FULLPHYSICS`: time, qpos, qvel, ...)."""
+    pressure_bar: np.ndarray
+    """[B, 3] chamber pressures (bar), which the valves move on from."""
 
 
 class ModelValidationError(ValueError):
@@ -225,55 +235,104 @@ class Arm:
         poses, ok = self._jit_batched(self.mjx_model, commands)
         return np.asarray(poses, dtype=np.float64), np.asarray(ok)
 
-    def _rollout_c(self, batched: np.ndarray, chunk_periods: int = 50, with_qpos: bool = False):
-        m = self.mj_model
-        n_batch, n_periods, _ = batched.shape
-        spec = mujoco.mjtState.mjSTATE_FULLPHYSICS
-        data = mujoco.MjData(m)
+    def rest_state(self, batch: int = 1) -> SimState:
+        """The rest state every rollout starts from, `batch` times (MuJoCo C layout)."""
+        data = mujoco.MjData(self.mj_model)
         data.qpos[:], data.qvel[:] = self.rest_qpos, self.rest_qvel
         data.act[:] = 0.0
-        state = np.zeros((n_batch, mujoco.mj_stateSize(m, spec)))
-        mujoco.mj_getState(m, data, state[0], spec)
-        state[:] = state[0]
-        pressure = np.full((n_batch, 3), self.valve.p_min_bar)
+        spec = mujoco.mjtState.mjSTATE_FULLPHYSICS
+        physics = np.zeros(mujoco.mj_stateSize(self.mj_model, spec))
+        mujoco.mj_getState(self.mj_model, data, physics, spec)
+        return SimState(
+            physics=np.tile(physics, (batch, 1)),
+            pressure_bar=np.full((batch, 3), self.valve.p_min_bar),
+        )
+
+    def rollout_c_from(
+        self, start: SimState, pressures_bar, pool: mj_rollout.Rollout | None = None
+    ) -> tuple[np.ndarray, np.ndarray, SimState]:
+        """MuJoCo C rollouts of programs from given states, e.g. to continue a rollout.
+
+        Args:
+          start: B states to start from (`rest_state`, or the end state of an earlier call).
+          pressures_bar: [B, T, 3] chamber commands (bar) at 10 Hz; saturated like `rollout`'s.
+          pool: a `mujoco.rollout.Rollout` to reuse across many short calls (one is made per
+            call otherwise).
+
+        Returns:
+          (poses [B, T, 6] read as `rollout` reads them, ok [B, T] flags, the end states). Chained
+          calls give the same poses as one call over the joined program.
+        """
+        commands = valve.saturate(check_pressures(pressures_bar), self.valve, xp=np)
+        if np.ndim(pressures_bar) != 3 or start.physics.shape[0] != commands.shape[0]:
+            raise ValueError(
+                f"need [B, T, 3] commands for {start.physics.shape[0]} states, got"
+                f" {np.shape(pressures_bar)}"
+            )
+        if pool is None:
+            nthread = min(os.cpu_count() or 1, commands.shape[0])
+            with mj_rollout.Rollout(nthread=nthread) as own_pool:
+                poses, ok, end, _ = self._rollout_c_chunks(start, commands, own_pool, False)
+        else:
+            poses, ok, end, _ = self._rollout_c_chunks(start, commands, pool, False)
+        return poses, ok, end
+
+    def _rollout_c(self, batched: np.ndarray, with_qpos: bool = False):
         commands = valve.saturate(batched, self.valve, xp=np)
+        nthread = min(os.cpu_count() or 1, batched.shape[0])
+        with mj_rollout.Rollout(nthread=nthread) as pool:
+            start = self.rest_state(batched.shape[0])
+            poses, ok, _, qpos = self._rollout_c_chunks(start, commands, pool, with_qpos)
+        return (poses, ok, qpos) if with_qpos else (poses, ok)
+
+    def _rollout_c_chunks(
+        self,
+        start: SimState,
+        commands: np.ndarray,
+        pool: mj_rollout.Rollout,
+        with_qpos: bool,
+        chunk_periods: int = 50,
+    ):
+        """Saturated commands [B, T, 3] from `start` -> (poses, ok, end state, qpos or None)."""
+        m = self.mj_model
+        n_batch, n_periods, _ = commands.shape
+        state = np.array(start.physics, dtype=np.float64)
+        pressure = np.array(start.pressure_bar, dtype=np.float64)
         poses = np.zeros((n_batch, n_periods, POSE_DIM))
         ok = np.ones((n_batch, n_periods), dtype=bool)
         qpos = np.zeros((n_batch, n_periods, m.nq)) if with_qpos else None
-        nthread = min(os.cpu_count() or 1, n_batch)
-        datas = [mujoco.MjData(m) for _ in range(nthread)]
+        datas = [mujoco.MjData(m) for _ in range(max(pool.nthread, 1))]
         sensor_pos = _tip_pose_sensor_adr(m)
-        with mj_rollout.Rollout(nthread=nthread) as pool:
-            for start in range(0, n_periods, chunk_periods):
-                stop = min(start + chunk_periods, n_periods)
-                ctrl = _chunk_controls(pressure, commands[:, start:stop], self, m.nu)
-                pressure = ctrl[:, -1, self.actuator_ids]
-                out_state, sensordata = pool.rollout(
-                    m,
-                    datas,
-                    state,
-                    ctrl,
-                    nstep=ctrl.shape[1],
-                    control_spec=mujoco.mjtState.mjSTATE_CTRL,
-                )
-                times = out_state[:, :, 0]
-                expected = state[:, :1] + self.timestep_s * np.arange(1, ctrl.shape[1] + 1)
-                fine = np.isfinite(out_state).all(-1) & np.isclose(times, expected, atol=1e-6)
-                ok[:, start:stop] = fine[:, self.n_substeps - 1 :: self.n_substeps]
-                # Sensors see the state before each step's integration; so do these states.
-                before = np.concatenate([state[:, None], out_state[:, :-1]], axis=1)
-                before = before[:, self.n_substeps - 1 :: self.n_substeps]
-                if sensor_pos is not None:
-                    sd = sensordata[:, self.n_substeps - 1 :: self.n_substeps]
-                    poses[:, start:stop] = sd[..., sensor_pos : sensor_pos + POSE_DIM]
-                else:
-                    poses[:, start:stop] = self._poses_from_states(before)
-                if with_qpos:
-                    qpos[:, start:stop] = before[..., 1 : 1 + m.nq]  # full state: time, qpos, ...
-                state = out_state[:, -1].copy()
+        for begin in range(0, n_periods, chunk_periods):
+            stop = min(begin + chunk_periods, n_periods)
+            ctrl = _chunk_controls(pressure, commands[:, begin:stop], self, m.nu)
+            pressure = ctrl[:, -1, self.actuator_ids]
+            out_state, sensordata = pool.rollout(
+                m,
+                datas,
+                state,
+                ctrl,
+                nstep=ctrl.shape[1],
+                control_spec=mujoco.mjtState.mjSTATE_CTRL,
+            )
+            times = out_state[:, :, 0]
+            expected = state[:, :1] + self.timestep_s * np.arange(1, ctrl.shape[1] + 1)
+            fine = np.isfinite(out_state).all(-1) & np.isclose(times, expected, atol=1e-6)
+            ok[:, begin:stop] = fine[:, self.n_substeps - 1 :: self.n_substeps]
+            # Sensors see the state before each step's integration; so do these states.
+            before = np.concatenate([state[:, None], out_state[:, :-1]], axis=1)
+            before = before[:, self.n_substeps - 1 :: self.n_substeps]
+            if sensor_pos is not None:
+                sd = sensordata[:, self.n_substeps - 1 :: self.n_substeps]
+                poses[:, begin:stop] = sd[..., sensor_pos : sensor_pos + POSE_DIM]
+            else:
+                poses[:, begin:stop] = self._poses_from_states(before)
+            if with_qpos:
+                qpos[:, begin:stop] = before[..., 1 : 1 + m.nq]  # full state: time, qpos, ...
+            state = out_state[:, -1].copy()
         # Once diverged, stay diverged (MuJoCo C resets the state after a bad step).
         ok = np.logical_and.accumulate(ok, axis=1)
-        return (poses, ok, qpos) if with_qpos else (poses, ok)
+        return poses, ok, SimState(physics=state, pressure_bar=pressure), qpos
 
     def _poses_from_states(self, states: np.ndarray) -> np.ndarray:
         """Poses [..., 6] of full-physics states [..., nstate], via forward kinematics."""

@@ -179,3 +179,22 @@ def test_mjcf_without_pose_sensors_gives_the_same_c_poses(small_xml):
         mjx_arm.load(xml=small_xml).rollout(program, backend="c"),
         atol=1e-12,
     )
+
+
+def test_c_rollouts_continue_from_their_end_states(small_xml):
+    arm = mjx_arm.load(xml=small_xml, domain="constrained")
+    program = np.random.default_rng(1).uniform(0.0, 3.5, size=(3, 12, 3))
+    whole = arm.rollout(program, backend="c")
+    start = arm.rest_state(3)
+    assert start.physics.shape[0] == 3 and np.all(start.pressure_bar == arm.valve.p_min_bar)
+    first, ok_first, middle = arm.rollout_c_from(start, program[:, :5])
+    second, ok_second, end = arm.rollout_c_from(middle, program[:, 5:])
+    # Chained calls are one rollout: bit for bit, and the chamber pressures carry over.
+    np.testing.assert_array_equal(np.concatenate([first, second], 1), whole)
+    assert ok_first.all() and ok_second.all()
+    assert not np.allclose(middle.pressure_bar, start.pressure_bar)
+    assert end.physics.shape == start.physics.shape
+    with pytest.raises(ValueError, match=r"\[B, T, 3\]"):
+        arm.rollout_c_from(start, program[0])
+    with pytest.raises(ValueError, match="3 states"):
+        arm.rollout_c_from(start, program[:2])

@@ -1,0 +1,327 @@
+"""Fine-tuning G_c by imitation of a simulator-based teacher (receding-horizon tracking).
+
+`ccgan.finetune` differentiates the tracking error through the MJX rollout, which is slow and
+reaches only a short window from rest. Here the simulator acts once, ahead of training: the
+receding-horizon tracker `eval.mpc.track` computes, in MuJoCo C, D_c commands that make the arm
+in D_c follow the D_s poses of shape-like programs (`eval.shapes.shape_like_programs`, never the
+five test shapes), over their whole length. G_c is then trained to reproduce those commands:
+
+    D_s program p_s [T, 3] --D_s sim--> x_s [T, 6] --eval.mpc.track (D_c sim)--> c* [T, 3]
+    loss = mean((G_c(p_s, x_s) - c*)^2) over pressures normalised to [0, 1]
+
+starting from a trained (or fine-tuned) translator, with Adam. Every `eval_every` epochs each
+seed's G_c is scored in the MuJoCo C simulator on held-out programs: the mean of the X_err (cm)
+over their first `window_s` seconds and over their whole length. Each seed's best iterate by that
+score is written (the starting translator counts), so imitation that makes tracking worse writes
+the original. The teacher's commands are cached in the output folder (`teacher.npz`, reused
+while the settings match), so a rerun trains without recomputing them.
+
+The files are translator checkpoints like `ccgan.finetune`'s (metadata "finetune" holds this
+stage, with "method": "distill"; earlier stages stay in "finetune_earlier").
+
+    python -m ccgan.distill --translators results/ccgan_sim5/translator_seed{0,1,2}.ckpt \\
+        --seeds 0 1 2 --out results/ccgan_sim6
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import json
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+import mjx_arm  # noqa: F401  (before jax: sets the XLA CPU flag)
+from ccgan import checkpoint
+from ccgan.data import PRESSURE_DIM, normalise_pressure, samples
+from ccgan.finetune import finetuned_checkpoint, generator_commands, x_err_cm_c
+from ccgan.translator import Translator, translator_from_checkpoint
+
+
+@dataclasses.dataclass(frozen=True)
+class DistillConfig:
+    """Settings of an imitation fine-tune."""
+
+    n_train: int = 128
+    """Teacher programs to imitate."""
+    n_val: int = 16
+    """Held-out programs that pick the best iterate."""
+    duration_s: float = 20.0
+    """Length of every program, from rest (s of source time)."""
+    window_s: float = 2.0
+    """The held-out score averages the X_err over the first window_s seconds and the whole."""
+    horizon_steps: int = 1
+    """The teacher's planning horizon (`eval.mpc.MpcConfig.horizon_steps`)."""
+    iterations: int = 2
+    """The teacher's Gauss-Newton iterations per step."""
+    epochs: int = 300
+    """Passes over the teacher programs."""
+    batch_size: int = 16
+    """Programs per Adam step."""
+    learning_rate: float = 1e-3
+    """Adam step size."""
+    eval_every: int = 50
+    """Epochs between held-out scores (and the last epoch)."""
+    seed: int = 0
+    """Seed of the programs and of the batch order."""
+    max_wall_s: float = 0.0
+    """Stop training after this many seconds (0: no limit); the best iterate so far is kept."""
+
+    def teacher_key(self) -> dict:
+        """The settings the cached teacher commands depend on."""
+        keys = ("n_train", "n_val", "duration_s", "horizon_steps", "iterations", "seed")
+        return {key: getattr(self, key) for key in keys}
+
+
+def teacher_data(
+    config: DistillConfig, arm_s, arm_c, k: int, cache: Path | None, log=print, progress=False
+):
+    """Programs, D_s targets and teacher commands of the train and val splits.
+
+    Returns:
+      dict of float32 arrays: "p_train" [N, T, 3] and "p_val" (bar), "x_train" [N, T, 6] and
+      "x_val" (m, unit d3), "c_train" [N, T, 3] and "c_val" (teacher commands per source step,
+      bar), plus "teacher_val_x_err_cm" [n_val] (the teacher's own held-out X_err).
+    """
+    from eval import mpc
+    from eval.metrics import position_error_cm
+    from eval.shapes import shape_like_programs
+
+    key = json.dumps(config.teacher_key() | {"k": k, "model": arm_c.model_hash}, sort_keys=True)
+    if cache is not None and cache.exists():
+        try:
+            with np.load(cache) as f:
+                if str(f["key"]) == key:
+                    log(f"teacher commands read from {cache}")
+                    return {name: f[name] for name in f.files if name != "key"}
+            log(f"{cache} was made with other settings; recomputing")
+        except (OSError, ValueError, KeyError) as err:
+            log(f"{cache} is unreadable ({err}); recomputing")
+    mpc_cfg = mpc.MpcConfig(horizon_steps=config.horizon_steps, iterations=config.iterations)
+    data = {}
+    for split, n in (("train", config.n_train), ("val", config.n_val)):
+        t0 = time.perf_counter()
+        programs = shape_like_programs(
+            n, config.duration_s, seed=config.seed, split=f"distill/{split}"
+        )
+        targets = arm_s.rollout(programs, backend="c")
+        commands, _ = mpc.track(arm_c, targets, k, programs, mpc_cfg, progress=progress)
+        teacher = commands[:, k - 1 :: k]
+        data |= {f"p_{split}": programs, f"x_{split}": targets, f"c_{split}": teacher}
+        wall_s = time.perf_counter() - t0
+        log(f"teacher: {n} {split} programs of {config.duration_s} s ({wall_s:.0f} s)")
+    poses = arm_c.rollout(np.repeat(data["c_val"], k, axis=1), backend="c")[:, k - 1 :: k]
+    data["teacher_val_x_err_cm"] = position_error_cm(poses, data["x_val"]).mean(-1)
+    data = {name: np.asarray(v, np.float32) for name, v in data.items()}
+    if cache is not None:
+        cache.parent.mkdir(parents=True, exist_ok=True)
+        tmp = cache.with_name(cache.name + ".tmp.npz")
+        np.savez_compressed(tmp, key=key, **data)
+        tmp.replace(cache)
+    return data
+
+
+def distill(
+    translators: list[Translator],
+    arm_s,
+    arm_c,
+    config: DistillConfig,
+    cache: Path | None = None,
+    progress: bool = True,
+    log=print,
+) -> tuple[list[dict], dict]:
+    """Trains each translator's G_c to reproduce the teacher's commands.
+
+    Args:
+      translators: trained translators (the same generator shape and k), one per seed.
+      arm_s, arm_c: the D_s and D_c arms.
+      config: settings.
+      cache: file for the teacher's commands (read when its settings match, else written).
+
+    Returns:
+      (best G_c parameters per translator, history: "train_loss" [epochs, S] (mean squared
+      normalised pressure error), "val" {epoch: {"score", "window", "whole"} [S] cm},
+      "teacher_val_x_err_cm" (whole, window), "best_epoch" [S] (0: the original was best),
+      "best_val_x_err_cm" [S], "val_x_err_cm_before" [S], "wall_s").
+    """
+    import jax
+    import jax.numpy as jnp
+    import optax
+    from tqdm.auto import tqdm
+
+    if not translators:
+        raise ValueError("need at least one translator")
+    k = translators[0].k
+    if any(t.k != k for t in translators):
+        raise ValueError(f"translators disagree on k: {[t.k for t in translators]}")
+    if config.batch_size > config.n_train:
+        raise ValueError(f"batch_size {config.batch_size} > n_train {config.n_train}")
+    tr = translators[0]
+    t0 = time.perf_counter()
+    data = teacher_data(config, arm_s, arm_c, k, cache, log, progress)
+    window = int(round(config.window_s * mjx_arm.CONTROL_HZ))
+    teacher_whole = float(data["teacher_val_x_err_cm"].mean())
+    s_train = jnp.asarray(samples(data["p_train"], data["x_train"], tr.bounds))
+    s_val = jnp.asarray(samples(data["p_val"], data["x_val"], tr.bounds))
+    c_train = jnp.asarray(normalise_pressure(data["c_train"]), jnp.float32)
+    x_val = np.asarray(data["x_val"], np.float64)
+
+    def loss_fn(g_params, s_batch, c_batch):
+        out = tr.generator.apply(g_params, s_batch)[..., :PRESSURE_DIM]
+        return jnp.mean((out - c_batch) ** 2)
+
+    opt = optax.adam(config.learning_rate)
+    stacked = jax.tree.map(lambda *x: jnp.stack(x), *[t.g_c_params for t in translators])
+    opt_state = jax.vmap(opt.init)(stacked)
+
+    @jax.jit
+    def step(params, opt_state, s_batch, c_batch):
+        loss, grads = jax.vmap(jax.value_and_grad(loss_fn), in_axes=(0, None, None))(
+            params, s_batch, c_batch
+        )
+        updates, opt_state = jax.vmap(opt.update)(grads, opt_state, params)
+        return optax.apply_updates(params, updates), opt_state, loss
+
+    @jax.jit
+    def val_commands(params):
+        return jax.vmap(lambda g: generator_commands(tr, g, s_val))(params)
+
+    def validate(params) -> dict:
+        commands = np.asarray(val_commands(params), np.float64)
+        whole = x_err_cm_c(arm_c, commands, k, x_val)
+        head = x_err_cm_c(arm_c, commands[..., :window, :], k, x_val[:, :window])
+        return {"score": 0.5 * (whole + head), "window": head, "whole": whole}
+
+    teacher_head = x_err_cm_c(arm_c, data["c_val"][..., :window, :], k, x_val[:, :window])
+    history = {
+        "train_loss": [],
+        "val": {},
+        "teacher_val_x_err_cm": {"whole": teacher_whole, "window": teacher_head},
+        "complete": False,
+    }
+    scores = validate(stacked)
+    history["val"][0] = {name: v.tolist() for name, v in scores.items()}
+    best_params, best_err = stacked, scores["score"]
+    best_epoch = np.zeros(len(translators), int)
+    log(
+        f"held-out X_err (cm; mean of first {config.window_s} s and whole): before"
+        f" {np.round(best_err, 4).tolist()}; teacher: window {teacher_head:.4f}, whole"
+        f" {teacher_whole:.4f}"
+    )
+    rng = np.random.default_rng(config.seed)
+    params = stacked
+    n_batches = config.n_train // config.batch_size
+    bar = tqdm(range(1, config.epochs + 1), disable=not progress, desc="distill", unit="epoch")
+    for epoch in bar:
+        order = rng.permutation(config.n_train)
+        losses = []
+        for b in range(n_batches):
+            pick = np.sort(order[b * config.batch_size : (b + 1) * config.batch_size])
+            params, opt_state, loss = step(params, opt_state, s_train[pick], c_train[pick])
+            losses.append(np.asarray(loss))
+        loss = np.mean(losses, axis=0)
+        history["train_loss"].append(loss.tolist())
+        if not np.isfinite(loss).all():
+            log(f"epoch {epoch}: non-finite loss {loss}; stopping, keeping the best iterate")
+            break
+        out_of_time = config.max_wall_s > 0 and time.perf_counter() - t0 > config.max_wall_s
+        if epoch % config.eval_every == 0 or epoch == config.epochs or out_of_time:
+            scores = validate(params)
+            history["val"][epoch] = {name: v.tolist() for name, v in scores.items()}
+            better = scores["score"] < best_err
+            best_params = jax.tree.map(
+                lambda b, p, mask=better: jnp.where(
+                    mask.reshape((-1,) + (1,) * (p.ndim - 1)), p, b
+                ),
+                best_params,
+                params,
+            )
+            best_err = np.where(better, scores["score"], best_err)
+            best_epoch = np.where(better, epoch, best_epoch)
+            bar.set_postfix(loss=float(loss.mean()), val_cm=float(scores["score"].mean()))
+        if out_of_time:
+            log(f"stopping after epoch {epoch}: max_wall_s = {config.max_wall_s} s reached")
+            break
+    bar.close()
+    history |= {
+        "complete": True,
+        "epochs_run": len(history["train_loss"]),
+        "best_epoch": best_epoch.tolist(),
+        "val_x_err_cm_before": history["val"][0]["score"],
+        "best_val_x_err_cm": best_err.tolist(),
+        "wall_s": time.perf_counter() - t0,
+    }
+    best = [
+        jax.tree.map(lambda x, s=s: np.asarray(x[s]), best_params) for s in range(len(translators))
+    ]
+    return best, history
+
+
+def main(argv=None) -> None:
+    """CLI: `python -m ccgan.distill --translators A.ckpt [B.ckpt ...] --out DIR`."""
+    import jax
+
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("--translators", nargs="+", required=True, help="translator checkpoints")
+    p.add_argument("--seeds", type=int, nargs="+", help="seed of each file (default 0, 1, ...)")
+    p.add_argument("--out", required=True, help="output folder")
+    p.add_argument("--domain", default="constrained", help="D_c domain name (mjx_arm.DOMAINS)")
+    for f in dataclasses.fields(DistillConfig):
+        p.add_argument("--" + f.name.replace("_", "-"), type=type(f.default), default=f.default)
+    a = p.parse_args(argv)
+    seeds = a.seeds if a.seeds is not None else list(range(len(a.translators)))
+    if len(seeds) != len(a.translators):
+        p.error("give one seed per translator file")
+    config = DistillConfig(
+        **{f.name: getattr(a, f.name) for f in dataclasses.fields(DistillConfig)}
+    )
+    from mjx_arm.machine import cpu_model, enable_compilation_cache
+
+    enable_compilation_cache()
+    sources = [checkpoint.load(path) for path in a.translators]
+    translators = [
+        translator_from_checkpoint(src, path)
+        for src, path in zip(sources, a.translators, strict=True)
+    ]
+    arm_s, arm_c = mjx_arm.load(domain="source"), mjx_arm.load(domain=a.domain)
+    out = Path(a.out)
+    out.mkdir(parents=True, exist_ok=True)
+    dev = jax.devices()[0]
+    run = {
+        "method": "distill",
+        "command": "python -m ccgan.distill "
+        + " ".join(argv if argv is not None else sys.argv[1:]),
+        "machine": f"{cpu_model()}; JAX device: {dev.platform} ({dev.device_kind})",
+        "config": dataclasses.asdict(config),
+        "domain": a.domain,
+        "sources": [str(x) for x in a.translators],
+        "seeds": seeds,
+    }
+    params, history = distill(translators, arm_s, arm_c, config, cache=out / "teacher.npz")
+    for s_i, (seed, source) in enumerate(zip(seeds, sources, strict=True)):
+        meta = run | {
+            "seed": seed,
+            "best_epoch": history["best_epoch"][s_i],
+            "val_x_err_cm_before": history["val_x_err_cm_before"][s_i],
+            "val_x_err_cm_best": history["best_val_x_err_cm"][s_i],
+        }
+        tree, file_meta = finetuned_checkpoint(source, params[s_i], meta)
+        for name in [f"translator_seed{seed}.ckpt"] + (["translator.ckpt"] if s_i == 0 else []):
+            checkpoint.save(out / name, tree, file_meta)
+    tmp = out / "distill.json.tmp"
+    tmp.write_text(json.dumps(run | {"history": history}, indent=2))
+    tmp.replace(out / "distill.json")
+    print(
+        f"wrote {out}: held-out X_err (cm) before"
+        f" {np.round(history['val_x_err_cm_before'], 4).tolist()} -> best"
+        f" {np.round(history['best_val_x_err_cm'], 4).tolist()} at epochs"
+        f" {history['best_epoch']}; teacher {history['teacher_val_x_err_cm']}; "
+        f"{history['wall_s']:.1f} s"
+    )
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,81 @@
+"""Tests of ccgan.distill: G_c trained to imitate eval.mpc's commands (CPU, tiny)."""
+
+import dataclasses
+
+import jax
+import numpy as np
+import pytest
+
+import mjx_arm
+from ccgan import checkpoint, distill, load_translator
+from ccgan.finetune import x_err_cm_c
+from ccgan.translator import translator_path
+
+TINY = distill.DistillConfig(
+    n_train=4, n_val=2, duration_s=1.0, epochs=4, batch_size=2, eval_every=2, learning_rate=3e-3
+)
+
+
+@pytest.fixture(scope="module")
+def arms(small_xml):
+    return mjx_arm.load(xml=small_xml, domain="source"), mjx_arm.load(
+        xml=small_xml, domain="constrained"
+    )
+
+
+def test_distill_imitates_the_teacher_and_caches_it(arms, tmp_path):
+    arm_s, arm_c = arms
+    shipped = load_translator()
+    cache = tmp_path / "teacher.npz"
+    logs = []
+    params, history = distill.distill(
+        [shipped], arm_s, arm_c, TINY, cache=cache, progress=False, log=logs.append
+    )
+    assert cache.exists() and not any("read from" in line for line in logs)
+    # Imitation: the mean squared error to the teacher's commands falls.
+    loss = np.asarray(history["train_loss"])
+    assert loss.shape == (4, 1) and loss[-1, 0] < loss[0, 0]
+    assert sorted(history["val"]) == [0, 2, 4]
+    # The kept iterate is never worse than the start, and is the one the history names.
+    assert history["best_val_x_err_cm"][0] <= history["val_x_err_cm_before"][0]
+    best = history["val"][history["best_epoch"][0]]["score"][0]
+    assert history["best_val_x_err_cm"][0] == best
+    # The teacher tracks its held-out programs better than the untuned translator does.
+    assert history["teacher_val_x_err_cm"]["whole"] < history["val"][0]["whole"][0]
+
+    # The score, recomputed from the returned parameters in MuJoCo C.
+    data = distill.teacher_data(TINY, arm_s, arm_c, shipped.k, cache, log=logs.append)
+    assert "read from" in logs[-1]
+    tuned = dataclasses.replace(shipped, g_c_params=params[0])
+    x_val = data["x_val"].astype(np.float64)
+    pairs = zip(data["p_val"], x_val, strict=True)
+    cmds = np.stack([tuned.translate(p, x)[0][:: tuned.k] for p, x in pairs])
+    whole = x_err_cm_c(arm_c, cmds, tuned.k, x_val)
+    head = x_err_cm_c(arm_c, cmds[:, :20], tuned.k, x_val[:, :20])
+    np.testing.assert_allclose(0.5 * (whole + head), best, rtol=1e-4)
+
+    # Other settings: the cache is not reused.
+    other = dataclasses.replace(TINY, n_val=1)
+    logs.clear()
+    again = distill.teacher_data(other, arm_s, arm_c, shipped.k, cache, log=logs.append)
+    assert "other settings" in logs[0] and again["p_val"].shape[0] == 1
+    cache.write_bytes(b"not an npz")
+    logs.clear()
+    distill.teacher_data(other, arm_s, arm_c, shipped.k, cache, log=logs.append)
+    assert "unreadable" in logs[0] and np.load(cache)["p_val"].shape[0] == 1
+
+
+def test_distill_cli_writes_translators_with_their_history(tmp_path):
+    source = translator_path()
+    out = tmp_path / "run"
+    args = ["--translators", str(source), "--out", str(out), "--n-train", "2", "--n-val", "1"]
+    args += ["--duration-s", "0.5", "--epochs", "1", "--batch-size", "2", "--eval-every", "1"]
+    distill.main(args)
+    tuned = load_translator(out / "translator_seed0.ckpt")
+    _, meta = checkpoint.load(out / "translator.ckpt")
+    assert meta["finetune"]["method"] == "distill" and meta["finetune"]["seed"] == 0
+    assert (out / "teacher.npz").exists() and (out / "distill.json").exists()
+    shipped = load_translator(source)
+    assert tuned.k == shipped.k
+    leaves = jax.tree.leaves(tuned.g_c_params), jax.tree.leaves(shipped.g_c_params)
+    assert [x.shape for x in leaves[0]] == [x.shape for x in leaves[1]]
