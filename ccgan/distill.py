@@ -7,14 +7,16 @@ in D_c follow the D_s poses of shape-like programs (`eval.shapes.shape_like_prog
 five test shapes), over their whole length. G_c is then trained to reproduce those commands:
 
     D_s program p_s [T, 3] --D_s sim--> x_s [T, 6] --eval.mpc.track (D_c sim)--> c* [T, 3]
-    loss = mean((G_c(p_s, x_s) - c*)^2) over pressures normalised to [0, 1]
+    loss = mean_t(w_t (G_c(p_s, x_s)_t - c*_t)^2) over pressures normalised to [0, 1],
+           w_t = head_weight in the first window_s seconds, 1 after (normalised to mean 1)
 
 starting from a trained (or fine-tuned) translator, with Adam. Every `eval_every` epochs each
 seed's G_c is scored in the MuJoCo C simulator on held-out programs: the mean of the X_err (cm)
 over their first `window_s` seconds and over their whole length. Each seed's best iterate by that
 score is written (the starting translator counts), so imitation that makes tracking worse writes
 the original. The teacher's commands are cached in the output folder (`teacher.npz`, reused
-while the settings match), so a rerun trains without recomputing them.
+while the settings match and grown when more programs are asked for), so a rerun trains
+without recomputing them.
 
 The files are translator checkpoints like `ccgan.finetune`'s (metadata "finetune" holds this
 stage, with "method": "distill"; earlier stages stay in "finetune_earlier").
@@ -49,10 +51,19 @@ class DistillConfig:
     """Teacher programs to imitate."""
     n_val: int = 16
     """Held-out programs that pick the best iterate."""
+    n_train_full: int = 0
+    """More teacher programs, scaled to the full valve amplitude as the test shapes are
+    (`shape_like_program(full_scale=True)`, their own random stream)."""
+    n_val_full: int = 0
+    """More held-out programs at the full amplitude."""
     duration_s: float = 20.0
     """Length of every program, from rest (s of source time)."""
     window_s: float = 2.0
     """The held-out score averages the X_err over the first window_s seconds and the whole."""
+    head_weight: float = 1.0
+    """Weight of the first window_s seconds in the imitation loss (the rest weighs 1): the
+    start from rest is where the oracle is compared and where the teacher's commands change
+    fastest."""
     horizon_steps: int = 1
     """The teacher's planning horizon (`eval.mpc.MpcConfig.horizon_steps`)."""
     iterations: int = 2
@@ -71,8 +82,8 @@ class DistillConfig:
     """Stop training after this many seconds (0: no limit); the best iterate so far is kept."""
 
     def teacher_key(self) -> dict:
-        """The settings the cached teacher commands depend on."""
-        keys = ("n_train", "n_val", "duration_s", "horizon_steps", "iterations", "seed")
+        """The settings the cached teacher commands depend on (not the program counts)."""
+        keys = ("duration_s", "horizon_steps", "iterations", "seed")
         return {key: getattr(self, key) for key in keys}
 
 
@@ -81,8 +92,14 @@ def teacher_data(
 ):
     """Programs, D_s targets and teacher commands of the train and val splits.
 
+    Program i of a split is the same whatever the split's size (`shape_like_programs`), and the
+    teacher plans each program on its own, so the cache grows: a run asking for more programs
+    than it holds computes only the missing ones; one asking for fewer reads a prefix.
+
     Returns:
-      dict of float32 arrays: "p_train" [N, T, 3] and "p_val" (bar), "x_train" [N, T, 6] and
+      dict of float32 arrays, each split followed by its full-amplitude part ("train" has
+      n_train + n_train_full programs, "val" n_val + n_val_full):
+      "p_train" [N, T, 3] and "p_val" (bar), "x_train" [N, T, 6] and
       "x_val" (m, unit d3), "c_train" [N, T, 3] and "c_val" (teacher commands per source step,
       bar), plus "teacher_val_x_err_cm" [n_val] (the teacher's own held-out X_err).
     """
@@ -91,36 +108,60 @@ def teacher_data(
     from eval.shapes import shape_like_programs
 
     key = json.dumps(config.teacher_key() | {"k": k, "model": arm_c.model_hash}, sort_keys=True)
+    splits = (
+        ("train", config.n_train, False),
+        ("train_full", config.n_train_full, True),
+        ("val", config.n_val, False),
+        ("val_full", config.n_val_full, True),
+    )
+    store: dict[str, np.ndarray] = {}
     if cache is not None and cache.exists():
         try:
             with np.load(cache) as f:
                 if str(f["key"]) == key:
-                    log(f"teacher commands read from {cache}")
-                    return {name: f[name] for name in f.files if name != "key"}
-            log(f"{cache} was made with other settings; recomputing")
+                    store = {name: f[name] for name in f.files if name != "key"}
+                else:
+                    log(f"{cache} was made with other settings; recomputing")
         except (OSError, ValueError, KeyError) as err:
             log(f"{cache} is unreadable ({err}); recomputing")
     mpc_cfg = mpc.MpcConfig(horizon_steps=config.horizon_steps, iterations=config.iterations)
-    data = {}
-    for split, n in (("train", config.n_train), ("val", config.n_val)):
+    grown = False
+    for split, n, full_scale in splits:
+        have = len(store.get(f"p_{split}", ()))
+        if n == 0:
+            continue
+        if have >= n:
+            log(f"teacher: {n} {split} programs read from {cache}")
+            continue
         t0 = time.perf_counter()
         programs = shape_like_programs(
-            n, config.duration_s, seed=config.seed, split=f"distill/{split}"
-        )
+            n, config.duration_s, seed=config.seed, split=f"distill/{split}", full_scale=full_scale
+        )[have:]
         targets = arm_s.rollout(programs, backend="c")
         commands, _ = mpc.track(arm_c, targets, k, programs, mpc_cfg, progress=progress)
-        teacher = commands[:, k - 1 :: k]
-        data |= {f"p_{split}": programs, f"x_{split}": targets, f"c_{split}": teacher}
+        new = {"p": programs, "x": targets, "c": commands[:, k - 1 :: k]}
+        for name, value in new.items():
+            old = store.get(f"{name}_{split}", np.zeros((0,) + value.shape[1:], np.float32))
+            store[f"{name}_{split}"] = np.concatenate([old, value.astype(np.float32)])
+        grown = True
         wall_s = time.perf_counter() - t0
-        log(f"teacher: {n} {split} programs of {config.duration_s} s ({wall_s:.0f} s)")
-    poses = arm_c.rollout(np.repeat(data["c_val"], k, axis=1), backend="c")[:, k - 1 :: k]
-    data["teacher_val_x_err_cm"] = position_error_cm(poses, data["x_val"]).mean(-1)
-    data = {name: np.asarray(v, np.float32) for name, v in data.items()}
-    if cache is not None:
+        log(f"teacher: {n - have} new {split} programs of {config.duration_s} s ({wall_s:.0f} s)")
+    if grown and cache is not None:
         cache.parent.mkdir(parents=True, exist_ok=True)
         tmp = cache.with_name(cache.name + ".tmp.npz")
-        np.savez_compressed(tmp, key=key, **data)
+        np.savez_compressed(tmp, key=key, **store)
         tmp.replace(cache)
+    data = {}
+    for part in ("p", "x", "c"):
+        for joined in ("train", "val"):
+            pieces = [
+                store[f"{part}_{split}"][:n]
+                for split, n, _ in splits
+                if split.split("_")[0] == joined and n > 0
+            ]
+            data[f"{part}_{joined}"] = np.concatenate(pieces)
+    poses = arm_c.rollout(np.repeat(data["c_val"], k, axis=1), backend="c")[:, k - 1 :: k]
+    data["teacher_val_x_err_cm"] = position_error_cm(poses, data["x_val"]).mean(-1)
     return data
 
 
@@ -142,8 +183,8 @@ def distill(
       cache: file for the teacher's commands (read when its settings match, else written).
 
     Returns:
-      (best G_c parameters per translator, history: "train_loss" [epochs, S] (mean squared
-      normalised pressure error), "val" {epoch: {"score", "window", "whole"} [S] cm},
+      (best G_c parameters per translator, history: "train_loss" [epochs, S] (weighted mean
+      squared normalised pressure error), "val" {epoch: {"score", "window", "whole"} [S] cm},
       "teacher_val_x_err_cm" (whole, window), "best_epoch" [S] (0: the original was best),
       "best_val_x_err_cm" [S], "val_x_err_cm_before" [S], "wall_s").
     """
@@ -157,8 +198,9 @@ def distill(
     k = translators[0].k
     if any(t.k != k for t in translators):
         raise ValueError(f"translators disagree on k: {[t.k for t in translators]}")
-    if config.batch_size > config.n_train:
-        raise ValueError(f"batch_size {config.batch_size} > n_train {config.n_train}")
+    n_train = config.n_train + config.n_train_full
+    if config.batch_size > n_train or config.n_val + config.n_val_full == 0:
+        raise ValueError(f"need batch_size <= {n_train} training programs and some held-out ones")
     tr = translators[0]
     t0 = time.perf_counter()
     data = teacher_data(config, arm_s, arm_c, k, cache, log, progress)
@@ -169,9 +211,13 @@ def distill(
     c_train = jnp.asarray(normalise_pressure(data["c_train"]), jnp.float32)
     x_val = np.asarray(data["x_val"], np.float64)
 
+    n_steps = s_train.shape[1]
+    step_weight = jnp.where(jnp.arange(n_steps) < window, config.head_weight, 1.0)
+    step_weight = (step_weight / step_weight.mean())[None, :, None]
+
     def loss_fn(g_params, s_batch, c_batch):
         out = tr.generator.apply(g_params, s_batch)[..., :PRESSURE_DIM]
-        return jnp.mean((out - c_batch) ** 2)
+        return jnp.mean(step_weight * (out - c_batch) ** 2)
 
     opt = optax.adam(config.learning_rate)
     stacked = jax.tree.map(lambda *x: jnp.stack(x), *[t.g_c_params for t in translators])
@@ -213,10 +259,10 @@ def distill(
     )
     rng = np.random.default_rng(config.seed)
     params = stacked
-    n_batches = config.n_train // config.batch_size
+    n_batches = n_train // config.batch_size
     bar = tqdm(range(1, config.epochs + 1), disable=not progress, desc="distill", unit="epoch")
     for epoch in bar:
-        order = rng.permutation(config.n_train)
+        order = rng.permutation(n_train)
         losses = []
         for b in range(n_batches):
             pick = np.sort(order[b * config.batch_size : (b + 1) * config.batch_size])

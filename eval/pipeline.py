@@ -20,9 +20,14 @@ Methods:
            results/ccgan_sim5/translator.ckpt or --ccgan-sim-path; not in the default methods.
   wcgan    the WCGAN-GP baseline translator: a translator checkpoint given by --wcgan-path or
            found at results/wcgan/translator.ckpt.
+  mpc      receding-horizon tracking in the D_c simulator itself (`eval.mpc.track`, MuJoCo C,
+           k = the stretch k): at every source step the next command is planned by Gauss-Newton
+           on the simulated tracking error and applied. Not a translator (it needs the D_c
+           simulator at translation time); a model-based reference. Not in the default methods.
   oracle   D_c commands optimised directly through the differentiable MJX rollout with
            optax Adam (k = the stretch k), commands kept in the valve range by a sigmoid, starting
-           from the stretch program; a lower reference for the other methods. Like every
+           from the mpc commands (OracleConfig.init; "stretch" starts from the stretch program);
+           a lower reference for the other methods. Like every
            translator's output, one command per source step held k periods (OracleConfig.held;
            --oracle-per-period frees every control period). All shapes are
            optimised together (one vmapped rollout). Gradients through thousands of MJX steps
@@ -48,9 +53,9 @@ from pathlib import Path
 import numpy as np
 
 import mjx_arm  # noqa: F401  (before jax: sets the XLA CPU flag)
-from eval import metrics, shapes
+from eval import metrics, mpc, shapes
 
-METHODS = ("none", "stretch", "ccgan", "ccgan_sim", "wcgan", "oracle")
+METHODS = ("none", "stretch", "ccgan", "ccgan_sim", "wcgan", "mpc", "oracle")
 #: What runs without --methods (the oracle is left out on CPU).
 DEFAULT_METHODS = ("none", "stretch", "ccgan", "wcgan", "oracle")
 TRANSLATOR_METHODS = ("ccgan", "ccgan_sim", "wcgan")
@@ -70,8 +75,9 @@ class OracleConfig:
 
     steps: int = 30
     """Adam steps (a few hundred on a GPU; the CPU default is small)."""
-    learning_rate: float = 0.3
-    """Adam step size on the sigmoid logits (dimensionless)."""
+    learning_rate: float = 0.03
+    """Adam step size on the sigmoid logits (dimensionless). From the mpc start 0.3 overshoots
+    (bench/oracle_start.py); the stretch-started tables of earlier commits used 0.3."""
     horizon_s: float | None = 2.0
     """Seconds of the source program optimised (None: all of it)."""
     orientation_weight_cm_per_rad: float = 10.0
@@ -79,6 +85,13 @@ class OracleConfig:
     held: bool = True
     """One command per source step held k periods, the output space of every translator
     (False: a free command per control period)."""
+    init: str = "mpc"
+    """Where Adam starts: "mpc" (the receding-horizon tracker's commands, `eval.mpc`) or
+    "stretch" (the stretch program)."""
+
+    def __post_init__(self):
+        if self.init not in ("mpc", "stretch"):
+            raise ValueError(f"oracle init must be 'mpc' or 'stretch', got {self.init!r}")
 
 
 @dataclasses.dataclass(frozen=True)
@@ -298,7 +311,7 @@ def oracle_commands(
     """D_c commands that track the targets, optimised through the MJX rollout.
 
     The commands are p_min + (p_max - p_min) * sigmoid(z); z starts at the init commands (clipped
-    1% inside the range) and Adam minimises mean(X_err_cm^2) + w^2 mean(phi_err^2), with
+    0.01% inside the range) and Adam minimises mean(X_err_cm^2) + w^2 mean(phi_err^2), with
     phi_err^2 ~ 2 (1 - cos). Several programs are optimised at once (one vmapped rollout; Adam
     acts elementwise, so each program's iterates are those of its own optimisation), and each
     program's best iterate is returned.
@@ -343,7 +356,9 @@ def oracle_commands(
             "a held program's init commands must be constant over each step's k periods"
         )
     lo, hi = arm_c.valve.p_min_bar, arm_c.valve.p_max_bar
-    frac = np.clip((inits - lo) / (hi - lo), 0.01, 0.99)
+    # Inits at a valve limit start just inside it (the sigmoid never reaches its ends); Adam's
+    # normalised steps move them out again however flat the sigmoid is there.
+    frac = np.clip((inits - lo) / (hi - lo), 1e-4, 1 - 1e-4)
     z0 = jnp.asarray(np.log(frac / (1 - frac)), dtype=jnp.float32)
     target = jnp.asarray(targets, dtype=jnp.float32)
     rollout = jax.vmap(arm_c.rollout_fn(), in_axes=(None, 0))
@@ -365,7 +380,9 @@ def oracle_commands(
         loss = tracking_loss(poses[:, k - 1 :: k], target, w)
         return jnp.where(ok[:, -1], loss, jnp.inf)
 
-    opt = optax.adam(cfg.learning_rate)
+    # The step size is state, not a constant of the compiled step: one compilation (and the
+    # persistent cache) serves every learning rate.
+    opt = optax.inject_hyperparams(optax.adam)(learning_rate=cfg.learning_rate)
 
     @jax.jit
     def update(z, opt_state):
@@ -527,17 +544,21 @@ def evaluate(cfg: EvalConfig, command: str = "", log=print) -> dict:
 
     # Stretch factor from the validation program.
     k_stretch, k_errors = 1, {}
-    if "stretch" in methods or "oracle" in methods:
+    if "stretch" in methods or "oracle" in methods or "mpc" in methods:
         t0 = time.perf_counter()
         k_stretch, k_errors = choose_stretch_k(arm_s, arm_c, cfg)
         timings["choose_k_s"] = time.perf_counter() - t0
         log(f"stretch k = {k_stretch} (validation X_err cm by k: {k_errors})")
 
-    def commands_for(method, p_s, poses_s, seed):
+    mpc_commands: dict[str, np.ndarray] = {}
+
+    def commands_for(method, shape, p_s, poses_s, seed):
         if method == "none":
             return np.asarray(p_s), 1
         if method == "stretch":
             return stretch(p_s, k_stretch), k_stretch
+        if method == "mpc":
+            return mpc_commands[shape], k_stretch
         return translators[method].translate(p_s, poses_s, seed)
 
     def seeds_for(method):
@@ -561,16 +582,37 @@ def evaluate(cfg: EvalConfig, command: str = "", log=print) -> dict:
         horizon = n_steps
         if cfg.oracle.horizon_s is not None:
             horizon = max(1, min(n_steps, int(round(cfg.oracle.horizon_s * shapes.CONTROL_HZ))))
+        oracle_targets = np.stack([targets[s][:horizon] for s in cfg.shapes])
+        oracle_sources = np.stack([programs[s][:horizon] for s in cfg.shapes])
+        if cfg.oracle.init == "mpc":
+            t0 = time.perf_counter()
+            oracle_init, _ = mpc.track(arm_c, oracle_targets, k_stretch, oracle_sources)
+            timings["oracle_init_s"] = time.perf_counter() - t0
+        else:
+            oracle_init = stretch(oracle_sources, k_stretch)
         oracle_future = _InThread(
             oracle_commands,
             arm_c,
-            np.stack([targets[s][:horizon] for s in cfg.shapes]),
-            np.stack([stretch(programs[s][:horizon], k_stretch) for s in cfg.shapes]),
+            oracle_targets,
+            oracle_init,
             k_stretch,
             cfg.oracle,
             cfg.oracle.held,
             background=jax.default_backend() != "cpu",
         )
+
+    if "mpc" in methods:
+        t0 = time.perf_counter()
+        every, _ = mpc.track(
+            arm_c,
+            np.stack([targets[s] for s in cfg.shapes]),
+            k_stretch,
+            np.stack([programs[s] for s in cfg.shapes]),
+            progress=True,
+        )
+        mpc_commands.update(zip(cfg.shapes, every, strict=True))
+        timings["mpc_s"] = time.perf_counter() - t0
+        log(f"mpc: {len(cfg.shapes)} shapes tracked in the D_c simulator, {timings['mpc_s']:.1f} s")
 
     # Every method, seed, noise level and repetition of every shape: commands first, then one
     # batched D_c rollout per command length (one thread per trajectory on MuJoCo C).
@@ -578,7 +620,7 @@ def evaluate(cfg: EvalConfig, command: str = "", log=print) -> dict:
     jobs, keys = [], []
 
     def add_job(key, method, p_s, target, seed):
-        jobs.append(commands_for(method, p_s, target, seed))
+        jobs.append(commands_for(method, key[1], p_s, target, seed))
         keys.append(key)
 
     translated = [m for m in methods if m != "oracle"]
@@ -772,6 +814,7 @@ METHOD_NAMES = {
     "ccgan": "CCGAN-GP",
     "ccgan_sim": "CCGAN-GP + sim fine-tune",
     "wcgan": "WCGAN-GP",
+    "mpc": "MPC in the D_c simulator",
     "oracle": "the oracle",
 }
 
@@ -779,8 +822,8 @@ METHOD_NAMES = {
 #: Each learned translator and the methods its findings compare it with: the baseline WCGAN-GP
 #: only against the simple methods, CCGAN-GP against its fine-tuned version once (from that side).
 FINDINGS_BASES = {
-    "ccgan": ("none", "stretch", "wcgan"),
-    "ccgan_sim": ("none", "stretch", "ccgan", "wcgan"),
+    "ccgan": ("none", "stretch", "wcgan", "mpc"),
+    "ccgan_sim": ("none", "stretch", "ccgan", "wcgan", "mpc"),
     "wcgan": ("none", "stretch"),
 }
 
@@ -1002,6 +1045,13 @@ def parse_args(argv: list[str] | None = None) -> EvalConfig:
         help="oracle with a free command per control period (default: held k periods)",
     )
     p.add_argument("--oracle-steps", type=int, default=OracleConfig.steps)
+    p.add_argument("--oracle-lr", type=float, default=OracleConfig.learning_rate)
+    p.add_argument(
+        "--oracle-init",
+        choices=["mpc", "stretch"],
+        default=OracleConfig.init,
+        help="the oracle's start: the mpc commands or the stretch program",
+    )
     p.add_argument(
         "--oracle-horizon",
         type=float,
@@ -1036,7 +1086,13 @@ def parse_args(argv: list[str] | None = None) -> EvalConfig:
         wcgan_path=a.wcgan_path,
         ccgan_sim_path=a.ccgan_sim_path,
         target_domain=a.target_domain,
-        oracle=OracleConfig(steps=a.oracle_steps, horizon_s=horizon, held=not a.oracle_per_period),
+        oracle=OracleConfig(
+            steps=a.oracle_steps,
+            learning_rate=a.oracle_lr,
+            horizon_s=horizon,
+            held=not a.oracle_per_period,
+            init=a.oracle_init,
+        ),
     )
     if a.quick:
         cfg = dataclasses.replace(

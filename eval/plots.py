@@ -20,6 +20,7 @@ COLORS = {
     "ccgan": "tab:green",
     "ccgan_sim": "tab:purple",
     "wcgan": "tab:red",
+    "mpc": "tab:gray",
     "oracle": "black",
 }
 LABELS = {
@@ -29,6 +30,7 @@ LABELS = {
     "ccgan": "CCGAN-GP",
     "ccgan_sim": "CCGAN-GP + sim",
     "wcgan": "WCGAN-GP",
+    "mpc": "MPC (D_c sim)",
     "oracle": "oracle",
 }
 

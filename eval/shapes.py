@@ -160,7 +160,9 @@ def validation_program(duration_s: float = 20.0, seed: int = 1234) -> np.ndarray
 SHAPE_LIKE_KINDS = ("ellipse", "polygon", "staircase", "phase_jumps")
 
 
-def shape_like_program(rng: np.random.Generator, duration_s: float) -> np.ndarray:
+def shape_like_program(
+    rng: np.random.Generator, duration_s: float, full_scale: bool = False
+) -> np.ndarray:
     """One random program [T, 3] (bar, float32) of the shapes' signal types, never a test shape.
 
     The bending vector follows a random closed path at a random lap period, from a random phase:
@@ -172,6 +174,9 @@ def shape_like_program(rng: np.random.Generator, duration_s: float) -> np.ndarra
     Lap periods are uniform in [10, 60] s, direction either way. Half of the programs add a
     common-mode offset m in [-0.3, 0.3] (all three chambers up or down); the path is scaled so
     |m| + |b| <= 1, which keeps every command in P_MID +- AMPLITUDE, inside the valve range.
+
+    With `full_scale` the path is scaled up to that limit (its largest bend reaches
+    1 - |m|), as the test shapes' programs are; the random draws are the same.
 
     Used to fine-tune and validate translators on programs like the test shapes (slow, smooth
     or stepped, starting away from rest) without ever using the five shapes themselves.
@@ -208,18 +213,22 @@ def shape_like_program(rng: np.random.Generator, duration_s: float) -> np.ndarra
         w = 2.0 * math.pi * phase
         bend = rng.uniform(0.3, 1.0) * np.stack([np.cos(w), np.sin(w)], axis=-1)
     offset = rng.uniform(-0.3, 0.3) if rng.uniform() < 0.5 else 0.0
-    bend *= (1.0 - abs(offset)) / max(1.0, np.linalg.norm(bend, axis=-1).max())
+    peak = np.linalg.norm(bend, axis=-1).max()
+    bend *= (1.0 - abs(offset)) / (max(peak, 1e-9) if full_scale else max(1.0, peak))
     return (pressures_from_bend(bend) + AMPLITUDE_BAR * offset).astype(np.float32)
 
 
 def shape_like_programs(
-    n: int, duration_s: float, seed: int = 0, split: str = "train"
+    n: int, duration_s: float, seed: int = 0, split: str = "train", full_scale: bool = False
 ) -> np.ndarray:
     """[n, T, 3] `shape_like_program`s (bar, float32); program i of a split draws from
     ``np.random.default_rng([seed, crc32("shape_like/" + split), i])``, whatever n is."""
     stream = zlib.crc32(f"shape_like/{split}".encode()) & 0x7FFFFFFF
     return np.stack(
-        [shape_like_program(np.random.default_rng([seed, stream, i]), duration_s) for i in range(n)]
+        [
+            shape_like_program(np.random.default_rng([seed, stream, i]), duration_s, full_scale)
+            for i in range(n)
+        ]
     )
 
 

@@ -10,6 +10,7 @@ import mjx_arm
 from ccgan import checkpoint, distill, load_translator
 from ccgan.finetune import x_err_cm_c
 from ccgan.translator import translator_path
+from eval import shapes
 
 TINY = distill.DistillConfig(
     n_train=4, n_val=2, duration_s=1.0, epochs=4, batch_size=2, eval_every=2, learning_rate=3e-3
@@ -44,8 +45,9 @@ def test_distill_imitates_the_teacher_and_caches_it(arms, tmp_path):
     assert history["teacher_val_x_err_cm"]["whole"] < history["val"][0]["whole"][0]
 
     # The score, recomputed from the returned parameters in MuJoCo C.
+    logs.clear()
     data = distill.teacher_data(TINY, arm_s, arm_c, shipped.k, cache, log=logs.append)
-    assert "read from" in logs[-1]
+    assert all("read from" in line for line in logs) and len(logs) == 2
     tuned = dataclasses.replace(shipped, g_c_params=params[0])
     x_val = data["x_val"].astype(np.float64)
     pairs = zip(data["p_val"], x_val, strict=True)
@@ -54,11 +56,34 @@ def test_distill_imitates_the_teacher_and_caches_it(arms, tmp_path):
     head = x_err_cm_c(arm_c, cmds[:, :20], tuned.k, x_val[:, :20])
     np.testing.assert_allclose(0.5 * (whole + head), best, rtol=1e-4)
 
-    # Other settings: the cache is not reused.
-    other = dataclasses.replace(TINY, n_val=1)
+    # The cache grows: more programs plan only the new ones, which match a fresh plan.
     logs.clear()
+    more = distill.teacher_data(
+        dataclasses.replace(TINY, n_train=5, n_val=1), arm_s, arm_c, shipped.k, cache, logs.append
+    )
+    assert logs[0].startswith("teacher: 1 new train programs of 1.0 s")
+    assert "read from" in logs[1] and more["p_val"].shape[0] == 1
+    np.testing.assert_array_equal(more["c_train"][:4], data["c_train"])
+    fresh = distill.teacher_data(
+        dataclasses.replace(TINY, n_train=5, n_val=1), arm_s, arm_c, shipped.k, None, logs.append
+    )
+    np.testing.assert_allclose(fresh["c_train"][4], more["c_train"][4], atol=1e-6)
+    # Full-amplitude programs follow each split's own programs.
+    logs.clear()
+    both = distill.teacher_data(
+        dataclasses.replace(TINY, n_train=5, n_val=1, n_train_full=2, n_val_full=1),
+        arm_s, arm_c, shipped.k, cache, logs.append,
+    )  # fmt: skip
+    assert both["p_train"].shape[0] == 7 and both["p_val"].shape[0] == 2
+    np.testing.assert_array_equal(both["c_train"][:5], more["c_train"])
+    full = shapes.shape_like_programs(2, 1.0, split="distill/train_full", full_scale=True)
+    np.testing.assert_array_equal(both["p_train"][5:], full)
+    assert len(both["teacher_val_x_err_cm"]) == 2
+    # Other settings or a corrupt file: planned again, never mixed.
+    logs.clear()
+    other = dataclasses.replace(TINY, duration_s=0.5, n_val=1)
     again = distill.teacher_data(other, arm_s, arm_c, shipped.k, cache, log=logs.append)
-    assert "other settings" in logs[0] and again["p_val"].shape[0] == 1
+    assert "other settings" in logs[0] and again["p_val"].shape == (1, 5, 3)
     cache.write_bytes(b"not an npz")
     logs.clear()
     distill.teacher_data(other, arm_s, arm_c, shipped.k, cache, log=logs.append)

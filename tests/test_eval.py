@@ -9,7 +9,8 @@ import pytest
 
 import eval  # noqa: F401  (first: sets MUJOCO_GL before mujoco is imported)
 import mjx_arm  # (before jax)
-from eval import metrics, pipeline, render, shapes
+from ccgan.losses import tracking_loss
+from eval import metrics, mpc, pipeline, render, shapes
 
 
 @pytest.fixture(scope="module")
@@ -70,6 +71,11 @@ def test_shape_like_programs_in_range_reproducible_and_never_a_test_shape():
     # None is one of the five test shapes.
     for fn in shapes.SHAPES.values():
         assert np.abs(p - fn(60.0)[None]).max(axis=(1, 2)).min() > 0.1
+    # Full scale: the same draws scaled up to the amplitude limit, still in range.
+    full = shapes.shape_like_programs(64, 60.0, seed=3, split="train", full_scale=True)
+    assert full.min() >= lo - 1e-5 and full.max() <= hi + 1e-5
+    peak, peak_full = (np.abs(x - shapes.P_MID_BAR).max(axis=(1, 2)) for x in (p, full))
+    assert (peak_full >= peak - 1e-5).all() and (peak_full > peak + 0.1).mean() > 0.3
 
 
 def test_position_error_by_hand():
@@ -273,6 +279,43 @@ def test_oracle_lowers_the_loss_and_batches_like_one_program(small_xml):
     assert h.min() < h[0]
     with pytest.raises(ValueError, match="constant over each step"):
         pipeline.oracle_commands(arm_c, targets, both, k, cfg, held=True)
+
+
+def test_mpc_method_and_the_oracle_starting_from_it(small_xml, tmp_path):
+    """The mpc row is the receding-horizon tracker's; the oracle starts from its commands."""
+    cfg = pipeline.EvalConfig(
+        shapes=("circle", "kite"),
+        methods=("stretch", "mpc", "oracle"),
+        seeds=(0,),
+        duration_s=1.0,
+        stretch_candidates=(4,),
+        validation_duration_s=0.5,
+        robustness=False,
+        plots=False,
+        out_dir=str(tmp_path),
+        xml=small_xml,
+        oracle=pipeline.OracleConfig(steps=2, learning_rate=0.01, horizon_s=0.5),
+    )
+    data = pipeline.evaluate(cfg, command="test", log=lambda *_: None)
+    arm_s, arm_c = pipeline.load_arms(cfg)
+    programs = np.stack([shapes.circle(1.0), shapes.kite(1.0)])
+    targets = arm_s.rollout(programs, backend="c")
+    commands, _ = mpc.track(arm_c, targets, 4, programs)
+    for i, shape in enumerate(cfg.shapes):
+        row = data["table"][shape]
+        err = metrics.tracking_errors(pipeline.run_dc(arm_c, commands[i], 4, "c"), targets[i])
+        np.testing.assert_allclose(row["mpc"]["x_err_cm_mean"], err["x_err_cm_mean"], rtol=1e-9)
+        assert (
+            row["mpc"]["k"] == 4 and row["mpc"]["x_err_cm_mean"] < row["stretch"]["x_err_cm_mean"]
+        )
+        # The oracle's first iterate is the mpc's first 0.5 s, so its loss is theirs.
+        head = pipeline.run_dc(arm_c, commands[i, :20], 4, "c")
+        start_loss = float(tracking_loss(head, targets[i, :5], 10.0))
+        np.testing.assert_allclose(row["oracle"]["oracle_loss_first"], start_loss, rtol=1e-3)
+        assert row["oracle"]["oracle_loss_best"] <= row["oracle"]["oracle_loss_first"]
+    assert "| shape | stretch | mpc | oracle |" in (tmp_path / "shapes.md").read_text()
+    with pytest.raises(ValueError, match="oracle init"):
+        pipeline.OracleConfig(init="zeros")
 
 
 def test_findings_count_shapes_and_ratios():

@@ -1,0 +1,86 @@
+"""Where the oracle starts and how fast it steps: stretch or mpc start, Adam step sizes.
+
+For each (start, learning rate), runs `eval.pipeline.oracle_commands` on the first `--horizon`
+seconds of the chosen shapes (held commands, k = 10) and reports the loss of every iterate,
+the best loss and the X_err (cm) of the returned commands in MuJoCo C. The mpc start is
+`eval.mpc.track`'s commands (the oracle's default start).
+
+    PYTHONPATH=. python -m bench.oracle_start --shapes circle --steps 10 \\
+        --runs stretch:0.3 mpc:0.3 mpc:0.03 --out bench/results/cpu/oracle_start
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+
+import numpy as np
+
+import mjx_arm
+from bench import run_header
+from eval import metrics, mpc, pipeline, shapes
+
+
+def main(argv=None) -> None:
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("--shapes", nargs="+", default=["circle"], choices=list(shapes.SHAPES))
+    p.add_argument("--horizon", type=float, default=2.0, help="seconds optimised")
+    p.add_argument("--steps", type=int, default=10)
+    p.add_argument("--runs", nargs="+", default=["mpc:0.3", "mpc:0.03"], help="start:lr pairs")
+    p.add_argument("--out", required=True, help="output prefix (writes .json and .md)")
+    a = p.parse_args(argv)
+    k = 10
+    arm_s, arm_c = mjx_arm.load(domain="source"), mjx_arm.load(domain="constrained")
+    n = int(round(a.horizon * shapes.CONTROL_HZ))
+    programs = np.stack([shapes.SHAPES[s](60.0)[:n] for s in a.shapes])
+    targets = arm_s.rollout(programs, backend="c")
+    starts = {"stretch": pipeline.stretch(programs, k)}
+    if any(run.startswith("mpc:") for run in a.runs):
+        starts["mpc"], _ = mpc.track(arm_c, targets, k, programs)
+    rows = []
+    for run in a.runs:
+        start, lr = run.split(":")
+        cfg = pipeline.OracleConfig(steps=a.steps, learning_rate=float(lr), init=start)
+        cmds, info = pipeline.oracle_commands(arm_c, targets, starts[start], k, cfg, held=True)
+        x_start = metrics.position_error_cm(pipeline.run_dc(arm_c, starts[start], k, "c"), targets)
+        x_best = metrics.position_error_cm(pipeline.run_dc(arm_c, cmds, k, "c"), targets)
+        rows.append(
+            {
+                "start": start,
+                "learning_rate": float(lr),
+                "loss_history": np.asarray(info["loss_history"]).tolist(),
+                "best_loss": info["best_loss"],
+                "x_err_cm_start": x_start.mean(-1).tolist(),
+                "x_err_cm_best": x_best.mean(-1).tolist(),
+                "wall_s": info["wall_s"],
+            }
+        )
+        print(f"{run}: best loss {np.round(info['best_loss'], 5)}; {info['wall_s']:.0f} s")
+    header = run_header("bench.oracle_start", argv)
+    result = header | {"shapes": a.shapes, "horizon_s": a.horizon, "steps": a.steps, "rows": rows}
+    out = Path(a.out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    out.with_suffix(".json").write_text(json.dumps(result, indent=2))
+    lines = [f"# Oracle start and step size: {', '.join(a.shapes)}, first {a.horizon:g} s", ""]
+    lines += [f"- {key}: {value}" for key, value in header.items()]
+    lines += [
+        "",
+        "Loss (cm^2) of the first and last iterates and the best; X_err (cm) of the start and of"
+        " the returned (best) commands in MuJoCo C, mean over the shapes.",
+        "",
+        "| start | lr | loss first | loss last | loss best | X_err start | X_err best | wall s |",
+        "|---|---|---|---|---|---|---|---|",
+    ]
+    for r in rows:
+        h = np.asarray(r["loss_history"])
+        lines.append(
+            f"| {r['start']} | {r['learning_rate']:g} | {h[0].mean():.5f} | {h[-1].mean():.5f} |"
+            f" {np.mean(r['best_loss']):.5f} | {np.mean(r['x_err_cm_start']):.4f} |"
+            f" {np.mean(r['x_err_cm_best']):.4f} | {r['wall_s']:.0f} |"
+        )
+    out.with_suffix(".md").write_text("\n".join(lines) + "\n")
+
+
+if __name__ == "__main__":
+    main()
