@@ -61,7 +61,7 @@ DEFAULT_METHODS = ("none", "stretch", "ccgan", "wcgan", "oracle")
 TRANSLATOR_METHODS = ("ccgan", "ccgan_sim", "wcgan")
 #: Where the simulator-fine-tuned CCGAN-GP (`ccgan.finetune`) is looked for when no path is given.
 CCGAN_SIM_DEFAULT_PATH = (
-    Path(__file__).resolve().parent.parent / "results" / "ccgan_sim6" / "translator.ckpt"
+    Path(__file__).resolve().parent.parent / "results" / "ccgan_sim8" / "translator.ckpt"
 )
 #: Where the WCGAN-GP baseline's translator checkpoint is looked for when no path is given.
 WCGAN_DEFAULT_PATH = (
