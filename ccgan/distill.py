@@ -27,20 +27,17 @@ stage, with "method": "distill"; earlier stages stay in "finetune_earlier").
 
 from __future__ import annotations
 
-import argparse
 import dataclasses
 import json
-import sys
 import time
 from pathlib import Path
 
 import numpy as np
 
 import mjx_arm  # noqa: F401  (before jax: sets the XLA CPU flag)
-from ccgan import checkpoint
 from ccgan.data import PRESSURE_DIM, normalise_pressure, samples
-from ccgan.finetune import finetuned_checkpoint, generator_commands, x_err_cm_c
-from ccgan.translator import Translator, translator_from_checkpoint
+from ccgan.finetune import generator_commands, stage_parser, start_stage, x_err_cm_c
+from ccgan.translator import Translator
 
 
 @dataclasses.dataclass(frozen=True)
@@ -308,60 +305,29 @@ def distill(
 
 def main(argv=None) -> None:
     """CLI: `python -m ccgan.distill --translators A.ckpt [B.ckpt ...] --out DIR`."""
-    import jax
-
-    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    p.add_argument("--translators", nargs="+", required=True, help="translator checkpoints")
-    p.add_argument("--seeds", type=int, nargs="+", help="seed of each file (default 0, 1, ...)")
-    p.add_argument("--out", required=True, help="output folder")
-    p.add_argument("--domain", default="constrained", help="D_c domain name (mjx_arm.DOMAINS)")
+    p = stage_parser(__doc__.splitlines()[0])
     for f in dataclasses.fields(DistillConfig):
         p.add_argument("--" + f.name.replace("_", "-"), type=type(f.default), default=f.default)
     a = p.parse_args(argv)
-    seeds = a.seeds if a.seeds is not None else list(range(len(a.translators)))
-    if len(seeds) != len(a.translators):
-        p.error("give one seed per translator file")
     config = DistillConfig(
         **{f.name: getattr(a, f.name) for f in dataclasses.fields(DistillConfig)}
     )
-    from mjx_arm.machine import cpu_model, enable_compilation_cache
-
-    enable_compilation_cache()
-    sources = [checkpoint.load(path) for path in a.translators]
-    translators = [
-        translator_from_checkpoint(src, path)
-        for src, path in zip(sources, a.translators, strict=True)
-    ]
-    arm_s, arm_c = mjx_arm.load(domain="source"), mjx_arm.load(domain=a.domain)
-    out = Path(a.out)
-    out.mkdir(parents=True, exist_ok=True)
-    dev = jax.devices()[0]
-    run = {
-        "method": "distill",
-        "command": "python -m ccgan.distill "
-        + " ".join(argv if argv is not None else sys.argv[1:]),
-        "machine": f"{cpu_model()}; JAX device: {dev.platform} ({dev.device_kind})",
-        "config": dataclasses.asdict(config),
-        "domain": a.domain,
-        "sources": [str(x) for x in a.translators],
-        "seeds": seeds,
-    }
-    params, history = distill(translators, arm_s, arm_c, config, cache=out / "teacher.npz")
-    for s_i, (seed, source) in enumerate(zip(seeds, sources, strict=True)):
-        meta = run | {
-            "seed": seed,
+    stage = start_stage(p, a, "ccgan.distill", dataclasses.asdict(config), argv)
+    stage.run["method"] = "distill"
+    params, history = distill(
+        stage.translators, stage.arm_s, stage.arm_c, config, cache=stage.out / "teacher.npz"
+    )
+    per_seed = [
+        {
             "best_epoch": history["best_epoch"][s_i],
             "val_x_err_cm_before": history["val_x_err_cm_before"][s_i],
             "val_x_err_cm_best": history["best_val_x_err_cm"][s_i],
         }
-        tree, file_meta = finetuned_checkpoint(source, params[s_i], meta)
-        for name in [f"translator_seed{seed}.ckpt"] + (["translator.ckpt"] if s_i == 0 else []):
-            checkpoint.save(out / name, tree, file_meta)
-    tmp = out / "distill.json.tmp"
-    tmp.write_text(json.dumps(run | {"history": history}, indent=2))
-    tmp.replace(out / "distill.json")
+        for s_i in range(len(stage.seeds))
+    ]
+    stage.write(params, per_seed, history, "distill.json")
     print(
-        f"wrote {out}: held-out X_err (cm) before"
+        f"wrote {stage.out}: held-out X_err (cm) before"
         f" {np.round(history['val_x_err_cm_before'], 4).tolist()} -> best"
         f" {np.round(history['best_val_x_err_cm'], 4).tolist()} at epochs"
         f" {history['best_epoch']}; teacher {history['teacher_val_x_err_cm']}; "

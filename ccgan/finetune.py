@@ -375,15 +375,77 @@ def save_finetuned(path, source_path, g_c_params, finetune_meta: dict) -> Path:
     return checkpoint.save(path, tree, meta)
 
 
-def main(argv=None) -> None:
-    """CLI: `python -m ccgan.finetune --translators A.ckpt [B.ckpt ...] --out DIR`."""
-    import jax
-
-    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+def stage_parser(description: str) -> argparse.ArgumentParser:
+    """A parser with the flags of every fine-tune stage's CLI (this module's and `ccgan.distill`'s):
+    --translators, --seeds, --out, --domain."""
+    p = argparse.ArgumentParser(description=description)
     p.add_argument("--translators", nargs="+", required=True, help="translator checkpoints")
     p.add_argument("--seeds", type=int, nargs="+", help="seed of each file (default 0, 1, ...)")
     p.add_argument("--out", required=True, help="output folder")
     p.add_argument("--domain", default="constrained", help="D_c domain name (mjx_arm.DOMAINS)")
+    return p
+
+
+@dataclasses.dataclass
+class Stage:
+    """What a fine-tune stage's CLI loaded: its translators (each file read once), the arms, the
+    output folder and the run record every written file carries."""
+
+    seeds: list[int]
+    sources: list[tuple[dict, dict]]
+    translators: list[Translator]
+    arm_s: object
+    arm_c: object
+    out: Path
+    run: dict
+
+    def write(self, params, per_seed_meta: list[dict], history: dict, json_name: str) -> None:
+        """Writes each seed's translator file (G_c replaced, the stage's record added to its
+        metadata) and the history, atomically."""
+        for s_i, (seed, source) in enumerate(zip(self.seeds, self.sources, strict=True)):
+            meta = self.run | {"seed": seed} | per_seed_meta[s_i]
+            tree, file_meta = finetuned_checkpoint(source, params[s_i], meta)
+            names = [f"translator_seed{seed}.ckpt"] + (["translator.ckpt"] if s_i == 0 else [])
+            for name in names:
+                checkpoint.save(self.out / name, tree, file_meta)
+        tmp = self.out / f"{json_name}.tmp"
+        tmp.write_text(json.dumps(self.run | {"history": history}, indent=2))
+        tmp.replace(self.out / json_name)
+
+
+def start_stage(p: argparse.ArgumentParser, a, module: str, config: dict, argv) -> Stage:
+    """Loads what `stage_parser`'s flags name; `module` and `config` go into the run record."""
+    import jax
+
+    from mjx_arm.machine import cpu_model, enable_compilation_cache
+
+    seeds = a.seeds if a.seeds is not None else list(range(len(a.translators)))
+    if len(seeds) != len(a.translators):
+        p.error("give one seed per translator file")
+    enable_compilation_cache()
+    sources = [checkpoint.load(path) for path in a.translators]  # read once, rewritten often
+    translators = [
+        translator_from_checkpoint(src, path)
+        for src, path in zip(sources, a.translators, strict=True)
+    ]
+    out = Path(a.out)
+    out.mkdir(parents=True, exist_ok=True)
+    dev = jax.devices()[0]
+    run = {
+        "command": f"python -m {module} " + " ".join(argv if argv is not None else sys.argv[1:]),
+        "machine": f"{cpu_model()}; JAX device: {dev.platform} ({dev.device_kind})",
+        "config": config,
+        "domain": a.domain,
+        "sources": [str(x) for x in a.translators],
+        "seeds": seeds,
+    }
+    arm_s, arm_c = mjx_arm.load(domain="source"), mjx_arm.load(domain=a.domain)
+    return Stage(seeds, sources, translators, arm_s, arm_c, out, run)
+
+
+def main(argv=None) -> None:
+    """CLI: `python -m ccgan.finetune --translators A.ckpt [B.ckpt ...] --out DIR`."""
+    p = stage_parser(__doc__.splitlines()[0])
     for f in dataclasses.fields(FinetuneConfig):
         flag = "--" + f.name.replace("_", "-")
         if isinstance(f.default, tuple):
@@ -392,62 +454,33 @@ def main(argv=None) -> None:
             choices = PROGRAM_FAMILIES if f.name == "programs" else None
             p.add_argument(flag, type=type(f.default), default=f.default, choices=choices)
     a = p.parse_args(argv)
-    seeds = a.seeds if a.seeds is not None else list(range(len(a.translators)))
-    if len(seeds) != len(a.translators):
-        p.error("give one seed per translator file")
     config = FinetuneConfig(
         **{
             f.name: tuple(v) if isinstance(v := getattr(a, f.name), list) else v
             for f in dataclasses.fields(FinetuneConfig)
         }
     )
-    from mjx_arm.machine import cpu_model, enable_compilation_cache
-
-    enable_compilation_cache()
-    sources = [checkpoint.load(p) for p in a.translators]  # read once, rewritten often
-    translators = [
-        translator_from_checkpoint(src, p) for src, p in zip(sources, a.translators, strict=True)
-    ]
-    arm_s, arm_c = mjx_arm.load(domain="source"), mjx_arm.load(domain=a.domain)
-    out = Path(a.out)
-    out.mkdir(parents=True, exist_ok=True)
-    dev = jax.devices()[0]
-    run = {
-        "command": "python -m ccgan.finetune "
-        + " ".join(argv if argv is not None else sys.argv[1:]),
-        "machine": f"{cpu_model()}; JAX device: {dev.platform} ({dev.device_kind})",
-        "config": config.to_dict(),
-        "domain": a.domain,
-        "sources": [str(x) for x in a.translators],
-        "seeds": seeds,
-    }
+    stage = start_stage(p, a, "ccgan.finetune", config.to_dict(), argv)
 
     def write(params, history) -> None:
-        """The best translators so far and the history (atomically; rewritten at every
-        validation, so a killed run keeps its progress)."""
-        for s_i, (seed, source) in enumerate(zip(seeds, sources, strict=True)):
-            meta = run | {
-                "seed": seed,
-                "complete": history["complete"],
-                "best_step": history["best_step"][s_i],
-                "best_learning_rate": history["best_learning_rate"][s_i],
-                "best_anchor_weight": history["best_anchor_weight"][s_i],
-                "val_x_err_cm_before": history["val_x_err_cm_before"][s_i],
-                "val_x_err_cm_best": history["best_val_x_err_cm"][s_i],
-            }
-            tree, file_meta = finetuned_checkpoint(source, params[s_i], meta)
-            names = [f"translator_seed{seed}.ckpt"] + (["translator.ckpt"] if s_i == 0 else [])
-            for name in names:
-                checkpoint.save(out / name, tree, file_meta)
-        tmp = out / "finetune.json.tmp"
-        tmp.write_text(json.dumps(run | {"history": history}, indent=2))
-        tmp.replace(out / "finetune.json")
+        """The best translators so far and the history (rewritten at every validation, so a
+        killed run keeps its progress)."""
+        keys = ("best_step", "best_learning_rate", "best_anchor_weight", "val_x_err_cm_before")
+        per_seed = [
+            {"complete": history["complete"]}
+            | {key: history[key][s_i] for key in keys}
+            | {"val_x_err_cm_best": history["best_val_x_err_cm"][s_i]}
+            for s_i in range(len(stage.seeds))
+        ]
+        stage.write(params, per_seed, history, "finetune.json")
 
-    params, history = finetune(translators, arm_s, arm_c, config, on_validation=write)
+    params, history = finetune(
+        stage.translators, stage.arm_s, stage.arm_c, config, on_validation=write
+    )
     write(params, history)
     before = np.round(history["val_x_err_cm_before"], 4).tolist()
     print(
-        f"wrote {out}: validation X_err (cm) before {before}"
+        f"wrote {stage.out}: validation X_err (cm) before {before}"
         f" -> best {np.round(history['best_val_x_err_cm'], 4).tolist()}"
         f" at steps {history['best_step']}; {history['wall_s']:.1f} s"
     )

@@ -14,10 +14,11 @@ Methods:
            EvalConfig.stretch_candidates = {1, 5, 10, ..., 30}: the GAN's set {5, ..., 30} plus 1.
   ccgan    the trained CCGAN-GP translator `ccgan.load_translator(path)` (skipped with a note
            when none is available).
-  ccgan_sim  the CCGAN-GP translator fine-tuned through the MJX simulator (`ccgan.finetune`,
-           five stages: results/ccgan_sim, ccgan_sim2, ccgan_sim3 on babbling programs,
-           ccgan_sim4, ccgan_sim5 on shape-like ones): the last stage's
-           results/ccgan_sim5/translator.ckpt or --ccgan-sim-path; not in the default methods.
+  ccgan_sim  the CCGAN-GP translator fine-tuned in the simulator: through the MJX rollout
+           (`ccgan.finetune`: results/ccgan_sim, ccgan_sim2, ccgan_sim3 on babbling programs,
+           ccgan_sim4, ccgan_sim5 on shape-like ones), then by imitation of `eval.mpc`
+           (`ccgan.distill`: ccgan_sim6, ccgan_sim7, ccgan_sim8): the last stage's
+           results/ccgan_sim8/translator.ckpt or --ccgan-sim-path; not in the default methods.
   wcgan    the WCGAN-GP baseline translator: a translator checkpoint given by --wcgan-path or
            found at results/wcgan/translator.ckpt.
   mpc      receding-horizon tracking in the D_c simulator itself (`eval.mpc.track`, MuJoCo C,
