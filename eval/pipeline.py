@@ -941,7 +941,8 @@ def markdown_report(results: dict) -> str:
         effort = ""
         if "steps" in oracle_cfg and None not in loss_first + loss_best:
             effort = (
-                f" It ran {oracle_cfg['steps']} Adam steps (lr {oracle_cfg['learning_rate']});"
+                f" It started from the {oracle_cfg.get('init', 'stretch')} commands and ran"
+                f" {oracle_cfg['steps']} Adam steps (lr {oracle_cfg['learning_rate']});"
                 f" its loss fell from {min(loss_first):.4f}-{max(loss_first):.4f} to"
                 f" {min(loss_best):.4f}-{max(loss_best):.4f} (cm^2), so a longer optimisation"
                 " may lower it further and raise every ratio."
