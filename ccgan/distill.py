@@ -19,7 +19,8 @@ while the settings match and grown when more programs are asked for), so a rerun
 without recomputing them.
 
 The files are translator checkpoints like `ccgan.finetune`'s (metadata "finetune" holds this
-stage, with "method": "distill"; earlier stages stay in "finetune_earlier").
+stage, with "method": "distill"; earlier stages stay in "finetune_earlier"), rewritten at every
+validation ("complete": false until the run ends), so a killed run keeps its best iterates.
 
     python -m ccgan.distill --translators results/ccgan_sim5/translator_seed{0,1,2}.ckpt \\
         --seeds 0 1 2 --out results/ccgan_sim6
@@ -170,6 +171,7 @@ def distill(
     cache: Path | None = None,
     progress: bool = True,
     log=print,
+    on_validation=None,
 ) -> tuple[list[dict], dict]:
     """Trains each translator's G_c to reproduce the teacher's commands.
 
@@ -178,6 +180,9 @@ def distill(
       arm_s, arm_c: the D_s and D_c arms.
       config: settings.
       cache: file for the teacher's commands (read when its settings match, else written).
+      on_validation: optional callable(best parameters per translator, history), called after
+        every validation but the first with the best iterates so far (e.g. to write them, so
+        that a killed run keeps its progress); the history then has "complete": False.
 
     Returns:
       (best G_c parameters per translator, history: "train_loss" [epochs, S] (weighted mean
@@ -254,6 +259,21 @@ def distill(
         f" {np.round(best_err, 4).tolist()}; teacher: window {teacher_head:.4f}, whole"
         f" {teacher_whole:.4f}"
     )
+
+    def best_so_far() -> list[dict]:
+        """Each seed's best iterate so far; fills the history's summary fields."""
+        history.update(
+            epochs_run=len(history["train_loss"]),
+            best_epoch=best_epoch.tolist(),
+            val_x_err_cm_before=history["val"][0]["score"],
+            best_val_x_err_cm=best_err.tolist(),
+            wall_s=time.perf_counter() - t0,
+        )
+        return [
+            jax.tree.map(lambda x, s=s: np.asarray(x[s]), best_params)
+            for s in range(len(translators))
+        ]
+
     rng = np.random.default_rng(config.seed)
     params = stacked
     n_batches = n_train // config.batch_size
@@ -285,22 +305,14 @@ def distill(
             best_err = np.where(better, scores["score"], best_err)
             best_epoch = np.where(better, epoch, best_epoch)
             bar.set_postfix(loss=float(loss.mean()), val_cm=float(scores["score"].mean()))
+            if on_validation is not None:
+                on_validation(best_so_far(), history)
         if out_of_time:
             log(f"stopping after epoch {epoch}: max_wall_s = {config.max_wall_s} s reached")
             break
     bar.close()
-    history |= {
-        "complete": True,
-        "epochs_run": len(history["train_loss"]),
-        "best_epoch": best_epoch.tolist(),
-        "val_x_err_cm_before": history["val"][0]["score"],
-        "best_val_x_err_cm": best_err.tolist(),
-        "wall_s": time.perf_counter() - t0,
-    }
-    best = [
-        jax.tree.map(lambda x, s=s: np.asarray(x[s]), best_params) for s in range(len(translators))
-    ]
-    return best, history
+    history["complete"] = True
+    return best_so_far(), history
 
 
 def main(argv=None) -> None:
@@ -314,18 +326,29 @@ def main(argv=None) -> None:
     )
     stage = start_stage(p, a, "ccgan.distill", dataclasses.asdict(config), argv)
     stage.run["method"] = "distill"
+
+    def write(params, history) -> None:
+        """The best translators so far and the history (rewritten at every validation)."""
+        per_seed = [
+            {
+                "complete": history["complete"],
+                "best_epoch": history["best_epoch"][s_i],
+                "val_x_err_cm_before": history["val_x_err_cm_before"][s_i],
+                "val_x_err_cm_best": history["best_val_x_err_cm"][s_i],
+            }
+            for s_i in range(len(stage.seeds))
+        ]
+        stage.write(params, per_seed, history, "distill.json")
+
     params, history = distill(
-        stage.translators, stage.arm_s, stage.arm_c, config, cache=stage.out / "teacher.npz"
+        stage.translators,
+        stage.arm_s,
+        stage.arm_c,
+        config,
+        cache=stage.out / "teacher.npz",
+        on_validation=write,
     )
-    per_seed = [
-        {
-            "best_epoch": history["best_epoch"][s_i],
-            "val_x_err_cm_before": history["val_x_err_cm_before"][s_i],
-            "val_x_err_cm_best": history["best_val_x_err_cm"][s_i],
-        }
-        for s_i in range(len(stage.seeds))
-    ]
-    stage.write(params, per_seed, history, "distill.json")
+    write(params, history)
     print(
         f"wrote {stage.out}: held-out X_err (cm) before"
         f" {np.round(history['val_x_err_cm_before'], 4).tolist()} -> best"

@@ -29,9 +29,27 @@ def test_distill_imitates_the_teacher_and_caches_it(arms, tmp_path):
     shipped = load_translator()
     cache = tmp_path / "teacher.npz"
     logs = []
+    reports = []
+
+    def on_validation(best, hist):
+        reports.append((hist["complete"], list(hist["best_epoch"]), best[0]))
+
     params, history = distill.distill(
-        [shipped], arm_s, arm_c, TINY, cache=cache, progress=False, log=logs.append
+        [shipped],
+        arm_s,
+        arm_c,
+        TINY,
+        cache=cache,
+        progress=False,
+        log=logs.append,
+        on_validation=on_validation,
     )
+    # The best iterates so far were reported after the validations at epochs 2 and 4; the last
+    # report is the result.
+    assert [r[0] for r in reports] == [False, False] and history["complete"]
+    assert reports[-1][1] == history["best_epoch"]
+    for got, want in zip(jax.tree.leaves(reports[-1][2]), jax.tree.leaves(params[0]), strict=True):
+        np.testing.assert_array_equal(got, want)
     assert cache.exists() and not any("read from" in line for line in logs)
     # Imitation: the mean squared error to the teacher's commands falls.
     loss = np.asarray(history["train_loss"])
@@ -99,6 +117,7 @@ def test_distill_cli_writes_translators_with_their_history(tmp_path):
     tuned = load_translator(out / "translator_seed0.ckpt")
     _, meta = checkpoint.load(out / "translator.ckpt")
     assert meta["finetune"]["method"] == "distill" and meta["finetune"]["seed"] == 0
+    assert meta["finetune"]["complete"]
     assert (out / "teacher.npz").exists() and (out / "distill.json").exists()
     shipped = load_translator(source)
     assert tuned.k == shipped.k
