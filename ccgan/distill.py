@@ -37,7 +37,7 @@ import numpy as np
 
 import mjx_arm  # noqa: F401  (before jax: sets the XLA CPU flag)
 from ccgan.data import PRESSURE_DIM, normalise_pressure, samples
-from ccgan.finetune import generator_commands, stage_parser, start_stage, x_err_cm_c
+from ccgan.finetune import common_k, generator_commands, keep_better, stage_parser, start_stage
 from ccgan.translator import Translator
 
 
@@ -195,11 +195,10 @@ def distill(
     import optax
     from tqdm.auto import tqdm
 
-    if not translators:
-        raise ValueError("need at least one translator")
-    k = translators[0].k
-    if any(t.k != k for t in translators):
-        raise ValueError(f"translators disagree on k: {[t.k for t in translators]}")
+    from eval.metrics import position_error_cm
+    from eval.pipeline import run_dc, stretch
+
+    k = common_k(translators)
     n_train = config.n_train + config.n_train_full
     if config.batch_size > n_train or config.n_val + config.n_val_full == 0:
         raise ValueError(f"need batch_size <= {n_train} training programs and some held-out ones")
@@ -237,13 +236,21 @@ def distill(
     def val_commands(params):
         return jax.vmap(lambda g: generator_commands(tr, g, s_val))(params)
 
+    def errors(commands) -> tuple[np.ndarray, np.ndarray]:
+        """(X_err over the first window_s, over the whole program), cm, per leading index of
+        commands [..., B, T, 3] (one MuJoCo C rollout; rollouts are causal, so the window's
+        poses are the whole rollout's first ones)."""
+        commands = np.asarray(commands, np.float64)
+        flat = commands.reshape((-1,) + commands.shape[-2:])
+        poses = run_dc(arm_c, stretch(flat, k), k, "c").reshape(commands.shape[:-1] + (6,))
+        err = position_error_cm(poses, x_val)
+        return err[..., :window].mean(axis=(-2, -1)), err.mean(axis=(-2, -1))
+
     def validate(params) -> dict:
-        commands = np.asarray(val_commands(params), np.float64)
-        whole = x_err_cm_c(arm_c, commands, k, x_val)
-        head = x_err_cm_c(arm_c, commands[..., :window, :], k, x_val[:, :window])
+        head, whole = errors(val_commands(params))
         return {"score": 0.5 * (whole + head), "window": head, "whole": whole}
 
-    teacher_head = x_err_cm_c(arm_c, data["c_val"][..., :window, :], k, x_val[:, :window])
+    teacher_head = float(errors(data["c_val"])[0])
     history = {
         "train_loss": [],
         "val": {},
@@ -295,13 +302,7 @@ def distill(
             scores = validate(params)
             history["val"][epoch] = {name: v.tolist() for name, v in scores.items()}
             better = scores["score"] < best_err
-            best_params = jax.tree.map(
-                lambda b, p, mask=better: jnp.where(
-                    mask.reshape((-1,) + (1,) * (p.ndim - 1)), p, b
-                ),
-                best_params,
-                params,
-            )
+            best_params = keep_better(best_params, params, better)
             best_err = np.where(better, scores["score"], best_err)
             best_epoch = np.where(better, epoch, best_epoch)
             bar.set_postfix(loss=float(loss.mean()), val_cm=float(scores["score"].mean()))

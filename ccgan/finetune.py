@@ -147,6 +147,32 @@ def x_err_cm_c(arm_c, commands_bar: np.ndarray, k: int, target: np.ndarray):
     return float(err) if not lead else err
 
 
+def common_k(translators: list[Translator]) -> int:
+    """The time-stretching factor k every translator shares.
+
+    Raises:
+      ValueError: no translators, or they disagree on k.
+    """
+    if not translators:
+        raise ValueError("need at least one translator")
+    k = translators[0].k
+    if any(t.k != k for t in translators):
+        raise ValueError(f"translators disagree on k: {[t.k for t in translators]}")
+    return k
+
+
+def keep_better(best_params, params, better: np.ndarray):
+    """Stacked parameters [M, ...]: params where better [M] is True, else best_params."""
+    import jax
+    import jax.numpy as jnp
+
+    return jax.tree.map(
+        lambda b, p: jnp.where(better.reshape((-1,) + (1,) * (p.ndim - 1)), p, b),
+        best_params,
+        params,
+    )
+
+
 def finetune(
     translators: list[Translator],
     arm_s,
@@ -179,11 +205,7 @@ def finetune(
     import optax
     from tqdm.auto import tqdm
 
-    if not translators:
-        raise ValueError("need at least one translator")
-    k = translators[0].k
-    if any(t.k != k for t in translators):
-        raise ValueError(f"translators disagree on k: {[t.k for t in translators]}")
+    k = common_k(translators)
     tr = translators[0]
     w = config.orientation_weight_cm_per_rad
 
@@ -334,13 +356,7 @@ def finetune(
         if i % config.eval_every == 0 or i == config.steps or out_of_time:
             err = record_validation(i, params)
             better = err < best_err
-            best_params = jax.tree.map(
-                lambda b, p, mask=better: jnp.where(
-                    mask.reshape((-1,) + (1,) * (p.ndim - 1)), p, b
-                ),
-                best_params,
-                params,
-            )
+            best_params = keep_better(best_params, params, better)
             best_err = np.where(better, err, best_err)
             best_step = np.where(better, i, best_step)
             bar.set_postfix(loss=float(loss.mean()), val_cm=float(err.mean()))
