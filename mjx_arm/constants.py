@@ -9,6 +9,11 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parent.parent
 #: The committed, generated arm model.
 DEFAULT_MODEL_PATH = ROOT / "models" / "softarm.xml"
+#: The earlier arm, whose body bent as a solid 30 mm disc (15x stiffer than the I-Support
+#: section), kept byte for byte: the committed datasets and translators were made with it, and
+#: it is the comparison row of the model page. `ArmParams(section="solid")` regenerates its
+#: physics.
+SOLID_MODEL_PATH = ROOT / "models" / "softarm_solid.xml"
 
 #: Actuators of the three chambers, at 0, 120 and 240 degrees around the arm's axis.
 CHAMBER_ACTUATORS = ("chamber_0", "chamber_1", "chamber_2")
