@@ -12,6 +12,7 @@ import dataclasses
 import functools
 import hashlib
 import math
+import operator
 import os
 from pathlib import Path
 from typing import NamedTuple
@@ -29,6 +30,18 @@ from mjx_arm import constants, domains, valve
 POSE_DIM = 6
 #: A trajectory whose joint speed exceeds this (rad/s or m/s) is treated as diverged.
 MAX_JOINT_SPEED = 1.0e3
+#: Trajectories per MuJoCo C `mujoco.rollout` call in `Arm.rollout`: each call holds every
+#: substep's full state of a 5 s slice ([chunk, 1250, nstate] float64, about 1.65 MB per
+#: trajectory for the 20-segment arm), so 256 bound it near 0.4 GB while still filling every core.
+C_CHUNK = 256
+#: A rest state still moving faster than this (rad/s or m/s) after `_settle`'s time is unsettled.
+SETTLED_SPEED = 1.0e-3
+#: MuJoCo warnings raised when it meets a non-finite or huge state and resets the data.
+_INSTABILITY_WARNINGS = (
+    mujoco.mjtWarning.mjWARN_BADQPOS,
+    mujoco.mjtWarning.mjWARN_BADQVEL,
+    mujoco.mjtWarning.mjWARN_BADQACC,
+)
 
 
 class SimState(NamedTuple):
@@ -38,6 +51,16 @@ class SimState(NamedTuple):
     """[B, nstate] MuJoCo full-physics states (`mjSTATE_FULLPHYSICS`: time, qpos, qvel, ...)."""
     pressure_bar: np.ndarray
     """[B, 3] chamber pressures (bar), which the valves move on from."""
+    diverged: np.ndarray | None = None
+    """[B] bool: the trajectory diverged on its way to this state. MuJoCo C resets a diverged
+    state to the model's reference pose, so `physics` alone cannot tell; `Arm.rollout_c_from`
+    reports every later period of such a trajectory as not ok. None (a state built by hand)
+    means none diverged."""
+
+    def take(self, rows) -> SimState:
+        """The states of the given batch rows (an index array or a slice)."""
+        diverged = None if self.diverged is None else self.diverged[rows]
+        return SimState(self.physics[rows], self.pressure_bar[rows], diverged)
 
 
 class ModelValidationError(ValueError):
@@ -105,11 +128,13 @@ def check_pressures(pressures_bar) -> np.ndarray:
       The program as a float array [B, T, 3] (B = 1 for a single program).
 
     Raises:
-      ValueError: wrong shape, or a non-finite value (the message names where).
+      ValueError: wrong shape (an empty batch or program included: it would fail later, in a
+        reshape or after seconds of MJX compilation), or a non-finite value (the message names
+        where).
     """
     p = np.asarray(pressures_bar, dtype=np.float64)
-    if p.ndim not in (2, 3) or p.shape[-1] != 3 or p.shape[-2] == 0:
-        raise ValueError(f"pressures_bar must be [T, 3] or [B, T, 3] with T > 0, got {p.shape}")
+    if p.ndim not in (2, 3) or p.shape[-1] != 3 or p.shape[-2] == 0 or p.shape[0] == 0:
+        raise ValueError(f"pressures_bar must be [T, 3] or [B, T, 3] with B, T > 0, got {p.shape}")
     batched = p if p.ndim == 3 else p[None]
     bad = ~np.isfinite(batched)
     if bad.any():
@@ -168,7 +193,7 @@ class Arm:
 
     # ------------------------------------------------------------------ rollouts
 
-    def rollout(self, pressures_bar, backend: str = "mjx") -> np.ndarray:
+    def rollout(self, pressures_bar, backend: str = "mjx", chunk: int = C_CHUNK) -> np.ndarray:
         """Simulates pressure programs from rest and returns the tip pose after each command.
 
         Commands outside [0, 3.5] bar saturate like a real valve; commands under the valve floor
@@ -180,25 +205,30 @@ class Arm:
           pressures_bar: [T, 3] or [B, T, 3] chamber commands (bar) at 10 Hz.
           backend: "mjx" (JAX, jitted, vmapped over B) or "c" (MuJoCo C `mujoco.rollout`,
             multi-threaded over B).
+          chunk: "c" only: trajectories per `mujoco.rollout` call, which bounds memory (see
+            `C_CHUNK`); the poses do not depend on it. MJX runs the whole batch in one call
+            (one compilation per batch size).
 
         Returns:
           [T, 6] or [B, T, 6] float64 poses: tip position (m) then unit d3.
 
         Raises:
-          ValueError: bad shape or non-finite pressures.
+          ValueError: bad shape (an empty batch included), non-finite pressures, or chunk < 1.
           SimulationDivergedError: a trajectory's state became non-finite or exploded.
         """
         batched = check_pressures(pressures_bar)
         if backend == "mjx":
             poses, ok = self._rollout_mjx(batched)
         elif backend == "c":
-            poses, ok = self._rollout_c(batched)
+            poses, ok = self._rollout_c(batched, chunk=chunk)
         else:
             raise ValueError(f"backend must be 'mjx' or 'c', got {backend!r}")
         _raise_if_diverged(ok)
         return poses if np.ndim(pressures_bar) == 3 else poses[0]
 
-    def rollout_with_qpos(self, pressures_bar) -> tuple[np.ndarray, np.ndarray]:
+    def rollout_with_qpos(
+        self, pressures_bar, chunk: int = C_CHUNK
+    ) -> tuple[np.ndarray, np.ndarray]:
         """`rollout` on MuJoCo C that also returns the joint positions, e.g. to render the arm.
 
         Returns:
@@ -206,7 +236,7 @@ class Arm:
           reads the pose.
         """
         batched = check_pressures(pressures_bar)
-        poses, ok, qpos = self._rollout_c(batched, with_qpos=True)
+        poses, ok, qpos = self._rollout_c(batched, with_qpos=True, chunk=chunk)
         _raise_if_diverged(ok)
         return (qpos, poses) if np.ndim(pressures_bar) == 3 else (qpos[0], poses[0])
 
@@ -236,7 +266,18 @@ class Arm:
         return np.asarray(poses, dtype=np.float64), np.asarray(ok)
 
     def rest_state(self, batch: int = 1) -> SimState:
-        """The rest state every rollout starts from, `batch` times (MuJoCo C layout)."""
+        """The rest state every rollout starts from, `batch` (an int >= 1) times (MuJoCo C
+        layout), none diverged.
+
+        Raises:
+          ValueError: `batch` is not a whole number >= 1.
+        """
+        try:
+            batch = operator.index(batch)
+        except TypeError:
+            raise ValueError(f"batch must be an int >= 1, got {batch!r}") from None
+        if batch < 1:
+            raise ValueError(f"batch must be an int >= 1, got {batch}")
         data = mujoco.MjData(self.mj_model)
         data.qpos[:], data.qvel[:] = self.rest_qpos, self.rest_qvel
         data.act[:] = 0.0
@@ -246,10 +287,15 @@ class Arm:
         return SimState(
             physics=np.tile(physics, (batch, 1)),
             pressure_bar=np.full((batch, 3), self.valve.p_min_bar),
+            diverged=np.zeros(batch, dtype=bool),
         )
 
     def rollout_c_from(
-        self, start: SimState, pressures_bar, pool: mj_rollout.Rollout | None = None
+        self,
+        start: SimState,
+        pressures_bar,
+        pool: mj_rollout.Rollout | None = None,
+        chunk: int = C_CHUNK,
     ) -> tuple[np.ndarray, np.ndarray, SimState]:
         """MuJoCo C rollouts of programs from given states, e.g. to continue a rollout.
 
@@ -258,10 +304,13 @@ class Arm:
           pressures_bar: [B, T, 3] chamber commands (bar) at 10 Hz; saturated like `rollout`'s.
           pool: a `mujoco.rollout.Rollout` to reuse across many short calls (one is made per
             call otherwise).
+          chunk: trajectories per `mujoco.rollout` call (bounds memory, see `C_CHUNK`).
 
         Returns:
           (poses [B, T, 6] read as `rollout` reads them, ok [B, T] flags, the end states). Chained
-          calls give the same poses as one call over the joined program.
+          calls give the same poses as one call over the joined program, and the same flags: a
+          trajectory that diverged in an earlier call (its end state's `diverged`), or starts
+          from a non-finite state, is not ok at any period.
         """
         commands = valve.saturate(check_pressures(pressures_bar), self.valve, xp=np)
         if np.ndim(pressures_bar) != 3 or start.physics.shape[0] != commands.shape[0]:
@@ -270,20 +319,50 @@ class Arm:
                 f" {np.shape(pressures_bar)}"
             )
         if pool is None:
-            nthread = min(os.cpu_count() or 1, commands.shape[0])
-            with mj_rollout.Rollout(nthread=nthread) as own_pool:
-                poses, ok, end, _ = self._rollout_c_chunks(start, commands, own_pool, False)
+            with self._pool(commands.shape[0], chunk) as own_pool:
+                poses, ok, end, _ = self._rollout_c_batch(start, commands, own_pool, False, chunk)
         else:
-            poses, ok, end, _ = self._rollout_c_chunks(start, commands, pool, False)
+            poses, ok, end, _ = self._rollout_c_batch(start, commands, pool, False, chunk)
         return poses, ok, end
 
-    def _rollout_c(self, batched: np.ndarray, with_qpos: bool = False):
+    @staticmethod
+    def _pool(n_batch: int, chunk: int) -> mj_rollout.Rollout:
+        """A thread pool for MuJoCo C rollouts of `n_batch` trajectories, `chunk` at a time."""
+        return mj_rollout.Rollout(nthread=min(os.cpu_count() or 1, n_batch, max(chunk, 1)))
+
+    def _rollout_c(self, batched: np.ndarray, with_qpos: bool = False, chunk: int = C_CHUNK):
         commands = valve.saturate(batched, self.valve, xp=np)
-        nthread = min(os.cpu_count() or 1, batched.shape[0])
-        with mj_rollout.Rollout(nthread=nthread) as pool:
+        with self._pool(batched.shape[0], chunk) as pool:
             start = self.rest_state(batched.shape[0])
-            poses, ok, _, qpos = self._rollout_c_chunks(start, commands, pool, with_qpos)
+            poses, ok, _, qpos = self._rollout_c_batch(start, commands, pool, with_qpos, chunk)
         return (poses, ok, qpos) if with_qpos else (poses, ok)
+
+    def _rollout_c_batch(
+        self,
+        start: SimState,
+        commands: np.ndarray,
+        pool: mj_rollout.Rollout,
+        with_qpos: bool,
+        chunk: int,
+    ):
+        """`_rollout_c_chunks` over the batch, `chunk` trajectories at a time.
+
+        Trajectories are independent and MuJoCo C is deterministic per trajectory, so the
+        results equal one call over the whole batch; only the peak memory differs.
+        """
+        if operator.index(chunk) < 1:
+            raise ValueError(f"chunk must be >= 1, got {chunk}")
+        n_batch = commands.shape[0]
+        if n_batch <= chunk:
+            return self._rollout_c_chunks(start, commands, pool, with_qpos)
+        parts = [
+            self._rollout_c_chunks(start.take(rows), commands[rows], pool, with_qpos)
+            for rows in (slice(b, b + chunk) for b in range(0, n_batch, chunk))
+        ]
+        poses, ok, ends, qpos = zip(*parts, strict=True)
+        end = SimState(*(np.concatenate(fields) for fields in zip(*ends, strict=True)))
+        qpos = np.concatenate(qpos) if with_qpos else None
+        return np.concatenate(poses), np.concatenate(ok), end, qpos
 
     def _rollout_c_chunks(
         self,
@@ -293,13 +372,21 @@ class Arm:
         with_qpos: bool,
         chunk_periods: int = 50,
     ):
-        """Saturated commands [B, T, 3] from `start` -> (poses, ok, end state, qpos or None)."""
+        """Saturated commands [B, T, 3] from `start` -> (poses, ok, end state, qpos or None).
+
+        The batch goes to `pool` whole; chunk_periods (50 = 5 s) bounds the substep states held.
+        """
         m = self.mj_model
         n_batch, n_periods, _ = commands.shape
         state = np.array(start.physics, dtype=np.float64)
         pressure = np.array(start.pressure_bar, dtype=np.float64)
         poses = np.zeros((n_batch, n_periods, POSE_DIM))
         ok = np.ones((n_batch, n_periods), dtype=bool)
+        # A trajectory that diverged earlier (or starts non-finite) stays diverged: MuJoCo C would
+        # reset it and carry on from the reference pose as if nothing had happened.
+        ok[:, 0] = np.isfinite(state).all(-1)
+        if start.diverged is not None:
+            ok[:, 0] &= ~np.asarray(start.diverged, dtype=bool)
         qpos = np.zeros((n_batch, n_periods, m.nq)) if with_qpos else None
         datas = [mujoco.MjData(m) for _ in range(max(pool.nthread, 1))]
         sensor_pos = _tip_pose_sensor_adr(m)
@@ -318,7 +405,7 @@ class Arm:
             times = out_state[:, :, 0]
             expected = state[:, :1] + self.timestep_s * np.arange(1, ctrl.shape[1] + 1)
             fine = np.isfinite(out_state).all(-1) & np.isclose(times, expected, atol=1e-6)
-            ok[:, begin:stop] = fine[:, self.n_substeps - 1 :: self.n_substeps]
+            ok[:, begin:stop] &= fine[:, self.n_substeps - 1 :: self.n_substeps]
             # Sensors see the state before each step's integration; so do these states.
             before = np.concatenate([state[:, None], out_state[:, :-1]], axis=1)
             before = before[:, self.n_substeps - 1 :: self.n_substeps]
@@ -332,7 +419,8 @@ class Arm:
             state = out_state[:, -1].copy()
         # Once diverged, stay diverged (MuJoCo C resets the state after a bad step).
         ok = np.logical_and.accumulate(ok, axis=1)
-        return poses, ok, SimState(physics=state, pressure_bar=pressure), qpos
+        end = SimState(physics=state, pressure_bar=pressure, diverged=~ok[:, -1])
+        return poses, ok, end, qpos
 
     def _poses_from_states(self, states: np.ndarray) -> np.ndarray:
         """Poses [..., 6] of full-physics states [..., nstate], via forward kinematics."""
@@ -458,21 +546,123 @@ def _raise_if_diverged(ok: np.ndarray) -> None:
         )
 
 
-def _settle(m: mujoco.MjModel, p_min: float, max_time_s: float = 60.0) -> tuple[np.ndarray, ...]:
-    """Rest state: chambers at the valve floor, stepped until the arm stops moving."""
+def _settle(
+    m: mujoco.MjModel, p_min: float, max_time_s: float = 60.0
+) -> tuple[np.ndarray, np.ndarray, str | None]:
+    """Rest state: chambers at the valve floor, stepped until the arm stops moving.
+
+    Returns:
+      (rest qpos [nq], rest qvel [nv] (zeros), None), or a description of why the model has no
+      rest in place of None: it diverged (MuJoCo met a bad state and reset the data, or a speed
+      passed MAX_JOINT_SPEED), still moves faster than SETTLED_SPEED after `max_time_s`, or
+      rests absurdly far (its tip moved more than twice the arm's length from the reference
+      pose; an explicit drag instability can stretch a slide joint by kilometres while every
+      number stays finite).
+    """
     data = mujoco.MjData(m)
     ids = [m.actuator(n).id for n in constants.CHAMBER_ACTUATORS]
     data.ctrl[ids] = p_min
     steps_per_check = max(1, int(0.1 / m.opt.timestep))
+    speed = 0.0
     for _ in range(int(max_time_s / 0.1)):
         mujoco.mj_step(m, data, nstep=steps_per_check)
-        if not np.isfinite(data.qvel).all():
-            raise SimulationDivergedError(
-                "the model diverged while settling to rest", np.array([0]), np.array([0])
-            )
-        if np.abs(data.qvel).max() < 1e-7:
+        speed = float(np.abs(data.qvel).max(initial=0.0))
+        reset = sum(data.warning[w].number for w in _INSTABILITY_WARNINGS)
+        if reset or not np.isfinite(data.qpos).all() or not speed < MAX_JOINT_SPEED:
+            return data.qpos.copy(), np.zeros(m.nv), "it diverged while settling"
+        if speed < 1e-7:
             break
-    return data.qpos.copy(), np.zeros(m.nv)
+    if speed > SETTLED_SPEED:
+        return (
+            data.qpos.copy(),
+            np.zeros(m.nv),
+            f"it still moves at {speed:.3g} after {max_time_s} s",
+        )
+    # Tip displacement from the reference pose against the base-to-tip distance there.
+    tip_body = m.site_bodyid[m.site(constants.TIP_SITE).id]
+    reference = mujoco.MjData(m)
+    mujoco.mj_kinematics(m, reference)
+    site = m.site(constants.TIP_SITE).id
+    length = np.linalg.norm(reference.site_xpos[site] - reference.xpos[m.body_rootid[tip_body]])
+    mujoco.mj_kinematics(m, data)
+    moved = float(np.linalg.norm(data.site_xpos[site] - reference.site_xpos[site]))
+    if moved > 2.0 * length:
+        return (
+            data.qpos.copy(),
+            np.zeros(m.nv),
+            f"its tip rests {moved:.3g} m from the reference pose, over twice the arm's length"
+            f" ({length:.3g} m)",
+        )
+    return data.qpos.copy(), np.zeros(m.nv), None
+
+
+def _read_model(path, xml: str | None) -> tuple[mujoco.MjModel, Path | None, str, str]:
+    """Compiles the MJCF of `load`'s arguments.
+
+    Returns:
+      (model, its path or None, a name for messages, the MJCF text that `Arm.model_hash` hashes).
+
+    Raises:
+      ValueError: both a path and `xml` are given.
+      FileNotFoundError: no file at `path`.
+      ModelValidationError: the path is not an MJCF text file (a folder, a binary file such as
+        an .npz), or the MJCF does not parse or compile.
+    """
+    if xml is not None:
+        if path is not None:
+            raise ValueError(f"give an MJCF path or xml text, not both (path={str(path)!r})")
+        source, text, model_path = "MJCF string", xml, None
+    else:
+        model_path = Path(path) if path is not None else constants.DEFAULT_MODEL_PATH
+        source = str(model_path)
+        if not model_path.exists():
+            raise FileNotFoundError(f"no MJCF at {model_path}")
+        if not model_path.is_file():
+            raise ModelValidationError(f"{model_path} is not a file; an MJCF file is needed")
+        try:
+            text = model_path.read_text(encoding="utf-8")
+        except (OSError, UnicodeDecodeError) as err:
+            raise ModelValidationError(f"{model_path} is not an MJCF text file ({err})") from err
+    try:
+        if model_path is None:
+            mj_model = mujoco.MjModel.from_xml_string(text)
+        else:  # from the path, so that includes and assets resolve relative to the file
+            mj_model = mujoco.MjModel.from_xml_path(str(model_path))
+    except ValueError as err:
+        raise ModelValidationError(f"{source} does not parse or compile as MJCF: {err}") from err
+    return mj_model, model_path, source, text
+
+
+def _valve_params(m: mujoco.MjModel, source: str) -> valve.ValveParams:
+    """The valve constants of the MJCF's <custom> numerics (defaults where absent), checked
+    against the chamber actuators' ctrlrange.
+
+    Raises:
+      ModelValidationError: constants a valve cannot have (see `valve.check`).
+    """
+    params = valve.ValveParams(
+        **{
+            field: _custom_numeric(m, name, constants.CUSTOM_VALVE_FIELDS[name])
+            for field, name in _VALVE_NUMERICS.items()
+        }
+    )
+    ids = [m.actuator(n).id for n in constants.CHAMBER_ACTUATORS]
+    limited = m.actuator_ctrllimited[ids].astype(bool)
+    ranges = m.actuator_ctrlrange[ids][limited]
+    ctrl_range = (float(ranges[:, 0].max()), float(ranges[:, 1].min())) if limited.any() else None
+    try:
+        return valve.check(params, ctrl_range, names=_VALVE_NUMERICS)
+    except ValueError as err:
+        raise ModelValidationError(f"{source}: bad <custom> valve numerics: {err}") from err
+
+
+#: ValveParams field -> the MJCF <custom><numeric> that sets it.
+_VALVE_NUMERICS = {
+    "tau_rise_s": "valve_tau_rise",
+    "tau_drop_s": "valve_tau_drop",
+    "p_min_bar": "valve_p_min",
+    "p_max_bar": "valve_p_max",
+}
 
 
 def load(
@@ -486,39 +676,39 @@ def load(
     Args:
       path: an MJCF file; None loads the committed `models/softarm.xml`.
       domain: "source", "constrained", "aged", or a `Domain`.
-      xml: MJCF text instead of a path.
+      xml: MJCF text instead of a path (give one or the other, not both).
 
     Returns:
       An `Arm`, settled at rest.
 
     Raises:
-      ModelValidationError: the MJCF does not name the chamber actuators and the tip site, or its
-        options do not suit the API.
+      ValueError: both `path` and `xml` are given.
+      FileNotFoundError: no file at `path`.
+      ModelValidationError: the path is not an MJCF text file, the MJCF does not parse or
+        compile, does not name the chamber actuators and the tip site, its options do not suit
+        the API, or its <custom> valve numerics are unusable (tau <= 0, p_min < 0,
+        p_min >= p_max, or p_max above the actuators' ctrlrange, which would clip it).
+      SimulationDivergedError: the arm has no stable rest in the domain (diverges, keeps moving,
+        or rests absurdly far away), e.g. with a `Domain.inertia_scale` too small for the
+        timestep; the message names the scale.
     """
     domain = domains.resolve(domain)
-    if xml is not None:
-        source, text = "MJCF string", xml
-        mj_model = mujoco.MjModel.from_xml_string(xml)
-        model_path = None
-    else:
-        model_path = Path(path) if path is not None else constants.DEFAULT_MODEL_PATH
-        if not model_path.exists():
-            raise FileNotFoundError(f"no MJCF at {model_path}")
-        source, text = str(model_path), model_path.read_text()
-        try:
-            mj_model = mujoco.MjModel.from_xml_path(str(model_path))
-        except ValueError as err:
-            raise ModelValidationError(f"{model_path} does not compile: {err}") from err
+    mj_model, model_path, source, text = _read_model(path, xml)
     validate_model(mj_model, source)
     inertia_scale = domains.apply(mj_model, domain)
     mujoco.mj_setConst(mj_model, mujoco.MjData(mj_model))
-    valve_params = valve.ValveParams(
-        tau_rise_s=_custom_numeric(mj_model, "valve_tau_rise", constants.VALVE_TAU_RISE_S),
-        tau_drop_s=_custom_numeric(mj_model, "valve_tau_drop", constants.VALVE_TAU_DROP_S),
-        p_min_bar=_custom_numeric(mj_model, "valve_p_min", constants.P_MIN_BAR),
-        p_max_bar=_custom_numeric(mj_model, "valve_p_max", constants.P_MAX_BAR),
-    )
-    rest_qpos, rest_qvel = _settle(mj_model, valve_params.p_min_bar)
+    valve_params = _valve_params(mj_model, source)
+    rest_qpos, rest_qvel, problem = _settle(mj_model, valve_params.p_min_bar)
+    if problem is not None:
+        how = "picked automatically" if domain.inertia_scale is None else "set by the domain"
+        raise SimulationDivergedError(
+            f"{source} has no stable rest in domain {domain.name!r}: {problem}. Explicit Euler"
+            f" integration of its drag and springs is unstable at timestep"
+            f" {mj_model.opt.timestep:g} s with Domain.inertia_scale={inertia_scale:g} ({how});"
+            " leave Domain.inertia_scale=None (automatic) or raise it, or lower the timestep.",
+            np.array([0]),
+            np.array([0]),
+        )
     return Arm(
         mj_model=mj_model,
         domain=domain,

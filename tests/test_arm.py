@@ -139,15 +139,6 @@ def test_out_of_range_pressures_saturate_like_a_valve(small_xml):
     np.testing.assert_array_equal(arm.rollout(wild, backend="c"), arm.rollout(clipped, backend="c"))
 
 
-@pytest.mark.parametrize("backend", ["c", "mjx"])
-def test_diverging_simulation_is_reported_not_returned(backend):
-    params = dataclasses.replace(ArmParams(), n_segments=3, timestep_s=0.02)
-    arm = mjx_arm.load(xml=generate_xml(params), domain=mjx_arm.Domain(inertia_scale=1.0))
-    with pytest.raises(mjx_arm.SimulationDivergedError, match="diverged") as info:
-        arm.rollout(np.full((2, 10, 3), 3.5), backend=backend)
-    assert info.value.trajectories.tolist() == [0, 1]
-
-
 def test_twenty_segment_mjx_step_on_cpu_is_fast():
     """The CPU trap: without the XLA flag one 20-segment step takes minutes."""
     import jax
@@ -198,3 +189,31 @@ def test_c_rollouts_continue_from_their_end_states(small_xml):
         arm.rollout_c_from(start, program[0])
     with pytest.raises(ValueError, match="3 states"):
         arm.rollout_c_from(start, program[:2])
+
+
+def test_c_rollouts_in_chunks_equal_one_call(small_xml, monkeypatch):
+    """Chunked MuJoCo C rollouts bound memory (`Arm.rollout`'s chunk) and change no number."""
+    from mujoco import rollout as mj_rollout
+
+    arm = mjx_arm.load(xml=small_xml)
+    programs = np.random.default_rng(2).uniform(0.0, 3.5, size=(5, 7, 3))
+    whole = arm.rollout(programs, backend="c")
+    qpos_whole, _ = arm.rollout_with_qpos(programs)
+    batches = []
+    call = mj_rollout.Rollout.rollout
+
+    def counting(self, model, data, initial_state, *args, **kwargs):
+        batches.append(len(initial_state))
+        return call(self, model, data, initial_state, *args, **kwargs)
+
+    monkeypatch.setattr(mj_rollout.Rollout, "rollout", counting)
+    np.testing.assert_array_equal(arm.rollout(programs, backend="c", chunk=2), whole)
+    assert batches == [2, 2, 1]
+    qpos, poses = arm.rollout_with_qpos(programs, chunk=3)
+    np.testing.assert_array_equal(qpos, qpos_whole)
+    np.testing.assert_array_equal(poses, whole)
+    poses, ok, end = arm.rollout_c_from(arm.rest_state(5), programs, chunk=2)
+    np.testing.assert_array_equal(poses, whole)
+    assert ok.all() and end.physics.shape[0] == 5 and not end.diverged.any()
+    with pytest.raises(ValueError, match="chunk"):
+        arm.rollout(programs, backend="c", chunk=0)

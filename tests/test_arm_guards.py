@@ -1,0 +1,143 @@
+"""Guards of the arm API: bad input is refused up front with a clear error, and a divergence is
+never lost (3-segment arms, short rollouts)."""
+
+import re
+
+import numpy as np
+import pytest
+
+import mjx_arm
+from mjx_arm import valve
+
+
+@pytest.fixture(scope="module")
+def small_arm(small_xml):
+    return mjx_arm.load(xml=small_xml)
+
+
+@pytest.fixture(scope="module")
+def unstable_arm(small_xml):
+    """An arm that loads (its rest comes from the stable model) but diverges once driven.
+
+    Masses, inertias and armature x 1e-6 with gravity x 1e6 keep the statics (so the rest is
+    still an equilibrium) while the explicit drag rate grows a million times, far past the
+    Euler stability limit, whatever the arm's stiffness and medium.
+    """
+    arm = mjx_arm.load(xml=small_xml)
+    m = arm.mj_model
+    for field in (m.body_mass, m.body_inertia, m.dof_armature):
+        field[:] *= 1e-6
+    m.opt.gravity[:] /= 1e-6
+    return arm
+
+
+def _with_numeric(xml: str, name: str, value: float) -> str:
+    """The MJCF with the <custom> numeric `name` set to `value`."""
+    out, n = re.subn(rf'(<numeric name="{name}" data=")[^"]*(")', rf"\g<1>{value}\g<2>", xml)
+    assert n == 1, f"the generated MJCF has no numeric {name}"
+    return out
+
+
+# ---------------------------------------------------------------------------------- batches
+
+
+@pytest.mark.parametrize("backend", ["c", "mjx"])
+def test_empty_batch_is_refused_before_any_work(small_arm, backend):
+    with pytest.raises(ValueError, match=r"B, T > 0, got \(0, 5, 3\)"):
+        small_arm.rollout(np.zeros((0, 5, 3)), backend=backend)
+    with pytest.raises(ValueError, match=r"B, T > 0"):
+        small_arm.rollout_c_from(small_arm.rest_state(1), np.zeros((0, 5, 3)))
+
+
+@pytest.mark.parametrize("batch", [-1, 0, 1.5, "2"])
+def test_rest_state_needs_a_positive_int(small_arm, batch):
+    with pytest.raises(ValueError, match="batch must be an int >= 1"):
+        small_arm.rest_state(batch)
+    assert small_arm.rest_state(np.int64(2)).physics.shape[0] == 2
+
+
+# ---------------------------------------------------------------------------------- divergence
+
+
+@pytest.mark.parametrize("backend", ["c", "mjx"])
+def test_diverging_simulation_is_reported_not_returned(unstable_arm, backend):
+    with pytest.raises(mjx_arm.SimulationDivergedError, match="diverged") as info:
+        unstable_arm.rollout(np.full((2, 10, 3), 3.5), backend=backend)
+    assert info.value.trajectories.tolist() == [0, 1]
+
+
+def test_divergence_survives_chained_c_rollouts(unstable_arm):
+    """MuJoCo C resets a diverged state: continuing from it must not look healthy."""
+    program = np.full((2, 5, 3), 0.2)
+    program[:, :, 0] = 3.5
+    poses, ok, end = unstable_arm.rollout_c_from(unstable_arm.rest_state(2), program)
+    assert not ok[:, -1].any() and end.diverged.tolist() == [True, True]
+    _, ok_next, end_next = unstable_arm.rollout_c_from(end, program)
+    assert not ok_next.any() and end_next.diverged.all()
+
+
+def test_diverged_flag_of_a_start_state_is_honoured(small_arm):
+    program = np.full((3, 4, 3), 1.0)
+    start = small_arm.rest_state(3)._replace(diverged=np.array([False, True, False]))
+    start.physics[2, 1] = np.nan  # a non-finite start is diverged too
+    _, ok, end = small_arm.rollout_c_from(start, program)
+    assert ok[0].all() and not ok[1].any() and not ok[2].any()
+    assert end.diverged.tolist() == [False, True, True]
+    # A state built by hand without the flag (as before it existed) counts as healthy.
+    by_hand = mjx_arm.SimState(start.physics[:1], start.pressure_bar[:1])
+    assert small_arm.rollout_c_from(by_hand, program[:1])[1].all()
+
+
+# ---------------------------------------------------------------------------------- load
+
+
+def test_unstable_domain_is_refused_at_load(small_xml, small_arm):
+    """An inertia scale far below the automatic one must not load with an absurd rest (the
+    committed arm at inertia_scale=1.0 settled with its slide joint 80 km long)."""
+    too_light = mjx_arm.Domain(name="light", inertia_scale=small_arm.inertia_scale * 1e-3)
+    with pytest.raises(mjx_arm.SimulationDivergedError, match=r"Domain\.inertia_scale=") as err:
+        mjx_arm.load(xml=small_xml, domain=too_light)
+    assert "'light'" in str(err.value) and "no stable rest" in str(err.value)
+
+
+def test_load_refuses_what_is_not_an_mjcf(tmp_path, small_xml):
+    with pytest.raises(mjx_arm.ModelValidationError, match="MJCF string does not parse"):
+        mjx_arm.load(xml="<mujoco><worldbody>")
+    with pytest.raises(mjx_arm.ModelValidationError, match="is not a file"):
+        mjx_arm.load(tmp_path)
+    npz = tmp_path / "data.npz"
+    np.savez(npz, x=np.arange(1000.0))
+    with pytest.raises(mjx_arm.ModelValidationError, match="data.npz is not an MJCF text file"):
+        mjx_arm.load(npz)
+    broken = tmp_path / "broken.xml"
+    broken.write_text(small_xml[: len(small_xml) // 2])
+    with pytest.raises(mjx_arm.ModelValidationError, match="broken.xml does not parse"):
+        mjx_arm.load(broken)
+    model = tmp_path / "arm.xml"
+    model.write_text(small_xml)
+    with pytest.raises(ValueError, match="not both"):
+        mjx_arm.load(model, xml=small_xml)
+
+
+@pytest.mark.parametrize(
+    "name, value, message",
+    [
+        ("valve_p_max", 10.0, r"valve_p_max = 10 bar is above the chamber actuators' ctrlrange"),
+        ("valve_tau_rise", 0.0, r"valve_tau_rise = 0 s must be > 0"),
+        ("valve_tau_drop", -0.1, r"valve_tau_drop = -0.1 s must be > 0"),
+        ("valve_p_min", -1.0, r"valve_p_min = -1 bar must be >= 0"),
+        ("valve_p_min", 3.5, r"valve_p_min = 3.5 bar must be below valve_p_max"),
+    ],
+)
+def test_unusable_valve_numerics_are_refused(small_xml, name, value, message):
+    with pytest.raises(mjx_arm.ModelValidationError, match=message):
+        mjx_arm.load(xml=_with_numeric(small_xml, name, value))
+
+
+def test_valve_check_lists_every_problem():
+    bad = valve.ValveParams(tau_rise_s=float("nan"), tau_drop_s=0.0, p_min_bar=2.0, p_max_bar=1.0)
+    with pytest.raises(ValueError) as err:
+        valve.check(bad, ctrl_range=(0.0, 0.5))
+    for part in ("tau_rise_s = nan is not finite", "tau_drop_s = 0 s", "below p_max_bar", "0.5"):
+        assert part in str(err.value)
+    assert valve.check(valve.ValveParams(), ctrl_range=(0.0, 3.5)) == valve.ValveParams()
