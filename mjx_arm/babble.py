@@ -10,7 +10,8 @@ Generator seeded with ``[seed, stream_id(domain, split), i]``, so it does not de
 chunk, backend or device count. (NumPy rather than jax.random: each new batch shape would cost a
 JAX compilation of seconds on a small CPU, and the programs are a negligible cost.)
 
-Command line (writes ``<out>/<domain>_<split>.npz``, see `mjx_arm.dataset` for the layout)::
+Command line (writes ``<out>/<domain>_<split>.npz`` and ``<out>/manifest.json`` as a whole folder,
+replacing an earlier run's folder only once every file is written; see `mjx_arm.dataset`)::
 
     python -m mjx_arm.babble --preset paper --out data/babble          # 50 + 3 x 60 s, both domains
     python -m mjx_arm.babble --domain source --n 1000 --duration 10 --chunk 4096 --backend mjx
@@ -56,12 +57,11 @@ from jax.sharding import Mesh, NamedSharding
 from jax.sharding import PartitionSpec as P
 
 from mjx_arm import arm as arm_lib
-from mjx_arm import constants, dataset, machine
+from mjx_arm import constants, dataset, domains, machine
 
 BACKENDS = ("auto", "mjx", "c")
-#: Largest MuJoCo C batch per call: `mujoco.rollout` returns every substep's full state
-#: ([B, 2500, nstate] float64 per 5 s slice), and a few hundred programs already fill every core.
-C_MAX_CHUNK = 256
+#: Largest MuJoCo C batch per call, `Arm.rollout`'s own (see `mjx_arm.arm.C_CHUNK`).
+C_MAX_CHUNK = arm_lib.C_CHUNK
 
 
 @dataclasses.dataclass(frozen=True)
@@ -94,8 +94,14 @@ class BabbleConfig:
     def __post_init__(self):
         if self.backend not in BACKENDS:
             raise ValueError(f"backend must be one of {BACKENDS}, got {self.backend!r}")
+        if self.seed < 0:
+            raise ValueError(f"seed must be >= 0 (NumPy seeds), got {self.seed}")
         if min(self.n_train, self.n_val) < 0 or self.n_train + self.n_val == 0:
             raise ValueError("n_train and n_val must be >= 0, not both 0")
+        if not self.domains or len(set(self.domains)) != len(self.domains):
+            raise ValueError(f"need one or more distinct domains, got {list(self.domains)}")
+        for name in self.domains:
+            domains.resolve(name)  # an unknown name raises, listing the built-in ones
         if self.n_steps < 1 or self.chunk < 1:
             raise ValueError("duration_s must cover at least one control period; chunk >= 1")
         if not 0 < self.hold_min_steps <= self.hold_max_steps:
@@ -436,73 +442,171 @@ def run(
     xml: str | None = None,
     progress: bool = True,
 ) -> list[Path]:
-    """Generates the datasets of `config` and writes them to ``out_dir/<domain>_<split>.npz``.
+    """Generates the datasets of `config` and writes them, as one folder with a manifest, to
+    ``out_dir/<domain>_<split>.npz`` (`dataset.save_folder`).
+
+    `out_dir` is checked before any simulation (`dataset.check_output_folder`); an earlier run's
+    folder there is replaced only once the new one is complete.
 
     Returns:
       The paths written (none on processes other than 0 of a multi-host run).
+
+    Raises:
+      FileExistsError, PermissionError: `out_dir` cannot hold a run (checked first).
     """
+    dataset.check_output_folder(out_dir)
     datasets = babble(config, model_path=model_path, xml=xml, progress=progress)
     if jax.process_index() != 0:
         return []
-    return [dataset.save_dataset(dataset_path(out_dir, d.domain, d.split), d) for d in datasets]
+    named = {dataset_path(out_dir, d.domain, d.split).name: d for d in datasets}
+    return dataset.save_folder(out_dir, named)
 
 
 # ---------------------------------------------------------------------------------- command line
 
 
-def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
+def _int_at_least(low: int):
+    def parse(text: str) -> int:
+        try:
+            value = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"not a whole number: {text!r}") from None
+        if value < low:
+            raise argparse.ArgumentTypeError(f"must be >= {low}, got {value}")
+        return value
+
+    return parse
+
+
+def _positive_seconds(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not a number: {text!r}") from None
+    if not math.isfinite(value) or value <= 0:
+        raise argparse.ArgumentTypeError(f"must be a finite number of seconds > 0, got {text}")
+    return value
+
+
+class _HelpFormatter(argparse.ArgumentDefaultsHelpFormatter):
+    """Shows every default, except None ones: their help says what None means."""
+
+    def _get_help_string(self, action):
+        if action.default is None:
+            return action.help
+        return super()._get_help_string(action)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The command line of ``python -m mjx_arm.babble``; defaults are the paper's (`PAPER`)."""
     p = argparse.ArgumentParser(
         prog="python -m mjx_arm.babble",
-        description="Simulate pseudo-random pressure programs and save babbling datasets.",
+        description="Simulate pseudo-random pressure programs and save babbling datasets"
+        " (one folder per run: <domain>_<split>.npz files and manifest.json).",
+        formatter_class=_HelpFormatter,
     )
-    p.add_argument("--preset", choices=["paper"], help="paper: 50 + 3 x 60 s, both domains")
+    p.add_argument(
+        "--preset", choices=["paper"], help="paper: 50 + 3 x 60 s in both domains (the defaults)"
+    )
     p.add_argument(
         "--domain",
         default="both",
-        help="source, constrained, aged, both (= source,constrained) or a comma list such as"
+        help=f"{', '.join(domains.DOMAINS)}, both (= source,constrained) or a comma list such as"
         " source,aged (one shared task-space normalisation over the listed domains)",
     )
-    p.add_argument("--n", type=int, help="training trajectories per domain (default 50)")
-    p.add_argument("--n-val", type=int, help="validation trajectories per domain (default 3)")
-    p.add_argument("--duration", type=float, help="seconds per trajectory (default 60)")
-    p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--hold-min", type=float, help="shortest hold (s, default 0.5)")
-    p.add_argument("--hold-max", type=float, help="longest hold (s, default 3)")
-    p.add_argument("--backend", choices=BACKENDS, default="auto")
-    p.add_argument("--chunk", type=int, default=4096, help="trajectories per device call")
-    p.add_argument("--model", help="MJCF path (default: models/softarm.xml)")
-    p.add_argument("--out", default="out/babble", help="output folder")
+    p.add_argument(
+        "--n", type=_int_at_least(0), default=PAPER.n_train, help="training trajectories per domain"
+    )
+    p.add_argument(
+        "--n-val",
+        type=_int_at_least(0),
+        default=PAPER.n_val,
+        help="validation trajectories per domain",
+    )
+    p.add_argument(
+        "--duration",
+        type=_positive_seconds,
+        default=PAPER.duration_s,
+        help="seconds per trajectory",
+    )
+    p.add_argument(
+        "--seed", type=_int_at_least(0), default=PAPER.seed, help="root seed of the programs"
+    )
+    p.add_argument(
+        "--hold-min", type=_positive_seconds, default=PAPER.hold_min_s, help="shortest hold (s)"
+    )
+    p.add_argument(
+        "--hold-max", type=_positive_seconds, default=PAPER.hold_max_s, help="longest hold (s)"
+    )
+    p.add_argument(
+        "--backend",
+        choices=BACKENDS,
+        default=PAPER.backend,
+        help="mjx, c (MuJoCo C on all cores) or auto (c when JAX runs on the CPU)",
+    )
+    p.add_argument(
+        "--chunk",
+        type=_int_at_least(1),
+        default=PAPER.chunk,
+        help=f"trajectories per device call (MuJoCo C: at most {C_MAX_CHUNK})",
+    )
+    p.add_argument("--model", help="MJCF file (default: the committed models/softarm.xml)")
+    p.add_argument(
+        "--out",
+        default="out/babble",
+        help="output folder, written as a whole; an earlier run's folder is replaced",
+    )
     p.add_argument("--distributed", action="store_true", help="call jax.distributed.initialize()")
     p.add_argument(
         "--cache-dir",
         help="JAX persistent compilation cache folder (default on an accelerator:"
         " ~/.cache/softarm/jax, see mjx_arm.machine.enable_compilation_cache)",
     )
-    p.add_argument("--no-progress", action="store_true")
-    return p.parse_args(argv)
+    p.add_argument("--no-progress", action="store_true", help="hide the simulation progress bar")
+    return p
+
+
+def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
+    """Parses and checks the command line before any work: a bad option, an inconsistent
+    configuration, a missing model or an unusable output folder is a usage error (exit 2).
+
+    Returns:
+      The namespace, with the checked `BabbleConfig` as ``config``.
+    """
+    p = build_parser()
+    args = p.parse_args(argv)
+    try:
+        args.config = config_from_args(args)
+    except ValueError as err:
+        p.error(str(err))
+    if args.model is not None and not Path(args.model).is_file():
+        p.error(f"--model {args.model}: no such MJCF file")
+    try:
+        dataset.check_output_folder(args.out)
+    except OSError as err:
+        p.error(f"--out: {err}")
+    return args
 
 
 def config_from_args(args: argparse.Namespace) -> BabbleConfig:
-    """Builds the BabbleConfig of parsed arguments (the preset first, then explicit options)."""
-    config = PAPER if args.preset == "paper" else BabbleConfig()
-    overrides = {
-        "seed": args.seed,
-        "backend": args.backend,
-        "chunk": args.chunk,
-        "domains": ("source", "constrained")
-        if args.domain == "both"
-        else tuple(d.strip() for d in args.domain.split(",")),
-    }
-    for field, value in (
-        ("n_train", args.n),
-        ("n_val", args.n_val),
-        ("duration_s", args.duration),
-        ("hold_min_s", args.hold_min),
-        ("hold_max_s", args.hold_max),
-    ):
-        if value is not None:
-            overrides[field] = value
-    return dataclasses.replace(config, **overrides)
+    """Builds the BabbleConfig of parsed arguments (their defaults are `PAPER`'s).
+
+    Raises:
+      ValueError: the options are inconsistent (e.g. a domain twice, holds min > max).
+    """
+    names = ("source", "constrained") if args.domain == "both" else args.domain.split(",")
+    return dataclasses.replace(
+        PAPER,
+        seed=args.seed,
+        n_train=args.n,
+        n_val=args.n_val,
+        duration_s=args.duration,
+        hold_min_s=args.hold_min,
+        hold_max_s=args.hold_max,
+        domains=tuple(name.strip() for name in names),
+        backend=args.backend,
+        chunk=args.chunk,
+    )
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -510,9 +614,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     if args.distributed:
         jax.distributed.initialize()
     machine.enable_compilation_cache(args.cache_dir or None)
-    config = config_from_args(args)
     start = time.perf_counter()
-    paths = run(config, args.out, model_path=args.model, progress=not args.no_progress)
+    paths = run(args.config, args.out, model_path=args.model, progress=not args.no_progress)
     for path in paths:
         print(path)
     if paths:

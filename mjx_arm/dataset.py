@@ -12,15 +12,26 @@ A file holds (no pickles; every field loads with ``allow_pickle=False``):
 Pressures normalise by the valve maximum (3.5 bar); poses by the per-axis bounds, which
 `mjx_arm.babble` takes from the data of both domains (as in the paper), so one normaliser
 serves both worlds.
+
+A babbling run's files only make sense together (they share pose bounds), so `save_folder`
+writes a folder as a whole: every file and a ``manifest.json`` (seed, config, pose bounds, model
+hash, and each file's sha256) go into a temporary sibling folder that is renamed into place
+at the end, replacing an earlier run's folder only then. A run killed part-way leaves the earlier
+folder as it was, and its temporaries are removed by the next run. `load_dataset` checks a file
+against its folder's manifest when there is one: a file the run did not write, a changed file,
+or a folder missing some of the run's files is refused. Folders without a manifest (written
+before it existed, or by hand) load file by file as before.
 """
 
 from __future__ import annotations
 
 import dataclasses
+import hashlib
 import json
 import os
+import shutil
 import tempfile
-import zipfile
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
@@ -33,6 +44,10 @@ FORMAT_VERSION = 1
 POSE_DIM = 6
 N_CHAMBERS = 3
 _ARRAY_KEYS = ("pressures_bar", "poses", "pose_low", "pose_high")
+#: The file that names a run's files in its folder.
+MANIFEST_NAME = "manifest.json"
+#: Bumped when the manifest layout changes.
+MANIFEST_FORMAT = 1
 
 
 class DatasetError(ValueError):
@@ -172,13 +187,15 @@ def save_dataset(path: str | os.PathLike, dataset: Dataset) -> Path:
 
     The file is written to a temporary file in the same folder, flushed to disk, then renamed over
     `path`, so readers see the old file or the whole new one, never a partial one; on any error
-    the temporary file is removed and an existing `path` is left as it was.
+    the temporary file is removed and an existing `path` is left as it was. Temporaries of
+    `path` left by a killed process are removed.
 
     Returns:
       The path written.
 
     Raises:
-      DatasetError: the dataset fails the checks `load_dataset` makes.
+      DatasetError: the dataset fails the checks `load_dataset` makes, or `path` is in a folder
+        written as a whole by `save_folder` (one more file would mix runs: write a new folder).
     """
     path = Path(path)
     arrays = {
@@ -189,12 +206,28 @@ def save_dataset(path: str | os.PathLike, dataset: Dataset) -> Path:
     }
     meta = _meta(dataset)
     _check(arrays, meta, str(path))
+    if (path.parent / MANIFEST_NAME).exists():
+        raise DatasetError(
+            f"{path}: {path.parent} holds a whole babbling run ({MANIFEST_NAME}); adding or"
+            " replacing one file would mix runs. Write the run to a new folder (`save_folder`)."
+        )
     path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    remove_stale_temporaries(path)
+
+    def write(f):
+        np.savez(f, meta=np.array(json.dumps(meta, sort_keys=True)), **arrays)
+
+    return _write_atomically(path, write)
+
+
+def _write_atomically(path: Path, write) -> Path:
+    """Calls write(binary file) on a temporary file beside `path`, syncs it, renames it over
+    `path`; removes the temporary on any error."""
+    fd, tmp = tempfile.mkstemp(prefix=_temporary_prefix(path), suffix=".tmp", dir=path.parent)
     try:
         os.chmod(tmp, 0o666 & ~_umask())  # mkstemp makes 0600 files; honour the umask instead
         with os.fdopen(fd, "wb") as f:
-            np.savez(f, meta=np.array(json.dumps(meta, sort_keys=True)), **arrays)
+            write(f)
             f.flush()
             os.fsync(f.fileno())
         os.replace(tmp, path)
@@ -207,6 +240,58 @@ def save_dataset(path: str | os.PathLike, dataset: Dataset) -> Path:
     return path
 
 
+def _temporary_prefix(path: Path) -> str:
+    """Temporaries of `path` are named ``.<name>.<pid>.<random>.tmp`` (``.old`` for a folder
+    being replaced), beside it, so that a later process can tell whether their writer is dead."""
+    return f".{path.name}.{os.getpid()}."
+
+
+def _alive(pid: int) -> bool:
+    """Whether process `pid` runs on this machine (signal 0 only checks; it sends nothing)."""
+    if pid <= 0:
+        return False
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    return True
+
+
+def remove_stale_temporaries(path: str | os.PathLike) -> list[Path]:
+    """Removes the temporaries of `path` (a dataset file or a run folder) that a killed process
+    left beside it.
+
+    A temporary whose writer still runs is left alone. A folder moved aside for replacement
+    (``.old``) whose writer died before renaming the new folder into place is the only copy of
+    the earlier run: it is put back at `path` when `path` is missing, removed otherwise.
+
+    Returns:
+      The temporaries removed or put back.
+    """
+    path = Path(path)
+    if not path.parent.is_dir():
+        return []
+    prefix = f".{path.name}."
+    done = []
+    for entry in sorted(path.parent.iterdir()):
+        name = entry.name
+        if not name.startswith(prefix) or not name.endswith((".tmp", ".old")):
+            continue
+        pid = name[len(prefix) :].split(".", 1)[0]
+        if pid.isdigit() and _alive(int(pid)):
+            continue
+        if name.endswith(".old") and not path.exists():
+            os.replace(entry, path)
+        elif entry.is_dir() and not entry.is_symlink():
+            shutil.rmtree(entry, ignore_errors=True)
+        else:
+            entry.unlink(missing_ok=True)
+        done.append(entry)
+    return done
+
+
 def _umask() -> int:
     mask = os.umask(0)
     os.umask(mask)
@@ -217,15 +302,18 @@ def load_dataset(path: str | os.PathLike, expected_model_hash: str | None = None
     """Loads and checks a dataset file.
 
     Args:
-      path: a file written by `save_dataset`.
+      path: a file written by `save_dataset` or `save_folder`.
       expected_model_hash: when given, the `Arm.model_hash` the data must have been made with.
 
     Returns:
       The `Dataset`.
 
     Raises:
-      DatasetError: the file is missing, truncated, corrupt (bad zip or CRC), has missing keys,
-        wrong shapes or dtypes, non-finite values, or bad metadata.
+      DatasetError: naming the file: it is missing or unreadable (truncated, corrupt, not a zip,
+        any error of the zip or npy layers), has missing keys, wrong shapes or dtypes,
+        non-finite values or bad metadata; or its folder has a manifest that the file does not
+        match (not listed, changed, other seed or model) or that lists files the folder lacks
+        or lacks files the folder has.
       ModelHashMismatchError: (a DatasetError) the model hash differs from `expected_model_hash`.
     """
     path = Path(path)
@@ -241,15 +329,22 @@ def load_dataset(path: str | os.PathLike, expected_model_hash: str | None = None
             meta_raw = npz["meta"]
     except DatasetError:
         raise
-    except (zipfile.BadZipFile, OSError, EOFError, ValueError, KeyError) as err:
-        raise DatasetError(f"{path}: unreadable or corrupt dataset file ({err})") from err
+    except Exception as err:
+        # Damaged bytes reach zipfile and numpy in many ways: besides BadZipFile and ValueError,
+        # a flipped flag bit raises RuntimeError ("encrypted, password required") or
+        # NotImplementedError (an unknown compression method), a flipped size MemoryError.
+        raise DatasetError(
+            f"{path}: unreadable or corrupt dataset file ({type(err).__name__}: {err})"
+        ) from err
     try:
         meta = json.loads(str(meta_raw[()]))
         if not isinstance(meta, dict):
             raise TypeError("metadata is not an object")
-    except (TypeError, ValueError, IndexError) as err:
-        raise DatasetError(f"{path}: bad metadata ({err})") from err
+    except Exception as err:
+        raise DatasetError(f"{path}: bad metadata ({type(err).__name__}: {err})") from err
     _check(arrays, meta, str(path))
+    if (path.parent / MANIFEST_NAME).exists():
+        _check_membership(path, meta, arrays)
     if expected_model_hash is not None and meta["model_hash"] != expected_model_hash:
         raise ModelHashMismatchError(
             f"{path}: simulated with model {meta['model_hash']}, expected {expected_model_hash};"
@@ -271,6 +366,254 @@ def load_dataset(path: str | os.PathLike, expected_model_hash: str | None = None
     )
 
 
+# ---------------------------------------------------------------------------------- folders
+
+
+def _sha256(path: Path) -> str:
+    digest = hashlib.sha256()
+    with open(path, "rb") as f:
+        for block in iter(lambda: f.read(1 << 20), b""):
+            digest.update(block)
+    return digest.hexdigest()
+
+
+def build_manifest(folder: str | os.PathLike) -> dict[str, Any]:
+    """The manifest of the dataset files (``*.npz``) in `folder`, from the files alone.
+
+    The run's id is a hash of the file names and contents, so the same files always give the
+    same manifest (an earlier run's folder can get its manifest afterwards, exactly). With a
+    manifest already there, every file is checked against it first (`load_dataset`).
+
+    Returns:
+      {"format", "id", "seed", "config", "model_hash", "pose_low", "pose_high", "files": {name:
+      {"sha256", "bytes", "domain", "split", "n_trajectories", "n_steps"}}}; pose bounds as
+      lists of 6 floats (float32 values).
+
+    Raises:
+      DatasetError: a file does not load, or the files are not one run: no files, or they
+        differ in seed, config, model hash or pose bounds.
+    """
+    folder = Path(folder)
+    files, runs = {}, {}
+    for path in sorted(folder.glob("*.npz")):
+        ds = load_dataset(path)
+        files[path.name] = {
+            "sha256": _sha256(path),
+            "bytes": path.stat().st_size,
+            "domain": ds.domain,
+            "split": ds.split,
+            "n_trajectories": ds.n_trajectories,
+            "n_steps": ds.n_steps,
+        }
+        runs[path.name] = {
+            "seed": ds.seed,
+            "config": ds.config,
+            "model_hash": ds.model_hash,
+            "pose_low": [float(x) for x in ds.pose_low],
+            "pose_high": [float(x) for x in ds.pose_high],
+        }
+    if not files:
+        raise DatasetError(f"{folder}: no dataset files (*.npz)")
+    first = next(iter(runs.values()))
+    for name, run in runs.items():
+        differ = [key for key in first if run[key] != first[key]]
+        if differ:
+            raise DatasetError(
+                f"{folder}: the files are not one babbling run: {name} differs from"
+                f" {next(iter(runs))} in {differ}"
+            )
+    run_id = hashlib.sha256(
+        "".join(f"{name}:{entry['sha256']}\n" for name, entry in files.items()).encode()
+    ).hexdigest()[:16]
+    return {"format": MANIFEST_FORMAT, "id": run_id, **first, "files": files}
+
+
+def write_manifest(folder: str | os.PathLike) -> Path:
+    """Writes `build_manifest(folder)` to ``folder/manifest.json`` atomically; returns its path."""
+    folder = Path(folder)
+    text = json.dumps(build_manifest(folder), indent=1, sort_keys=True) + "\n"
+    return _write_atomically(folder / MANIFEST_NAME, lambda f: f.write(text.encode()))
+
+
+def read_manifest(folder: str | os.PathLike) -> dict[str, Any]:
+    """The manifest of a run folder.
+
+    Raises:
+      DatasetError: it is missing, unreadable, or not a manifest of this format.
+    """
+    path = Path(folder) / MANIFEST_NAME
+    try:
+        manifest = json.loads(path.read_text(encoding="utf-8"))
+        files = manifest["files"]
+        if manifest["format"] != MANIFEST_FORMAT or not isinstance(files, dict):
+            raise ValueError(f"format {manifest['format']!r}, this code reads {MANIFEST_FORMAT}")
+        keys = {"sha256", "bytes", "domain", "split"}
+        if any(not isinstance(entry, dict) or keys - entry.keys() for entry in files.values()):
+            raise ValueError(f"every file entry needs {sorted(keys)}")
+    except Exception as err:
+        raise DatasetError(f"{path}: unreadable manifest ({type(err).__name__}: {err})") from err
+    return manifest
+
+
+def _check_membership(path: Path, meta: dict[str, Any], arrays: dict[str, np.ndarray]) -> None:
+    """Raises DatasetError unless `path` is, unchanged, one file of the complete run that its
+    folder's manifest describes."""
+    folder = path.parent
+    manifest = read_manifest(folder)
+    files = manifest["files"]
+    entry = files.get(path.name)
+    if entry is None:
+        raise DatasetError(
+            f"{path}: not a file of the run in {folder} (its {MANIFEST_NAME} lists"
+            f" {sorted(files)}); the folder mixes runs"
+        )
+    present = {p.name for p in folder.glob("*.npz")}
+    missing = sorted(set(files) - present)
+    foreign = sorted(present - set(files))
+    if missing or foreign:
+        raise DatasetError(
+            f"{path}: {folder} does not hold the run its {MANIFEST_NAME} describes:"
+            f" missing {missing}, not of the run {foreign}; regenerate the folder"
+        )
+    # Every file, not only `path`: one swapped sibling of the same size would mix the run too.
+    changed = [
+        name
+        for name, listed in files.items()
+        if (folder / name).stat().st_size != listed["bytes"]
+        or _sha256(folder / name) != listed["sha256"]
+    ]
+    if changed:
+        raise DatasetError(
+            f"{path}: {changed} differ from the files the run in {folder} wrote (size or sha256);"
+            " the folder mixes runs or was altered"
+        )
+    expected = {
+        "domain": entry["domain"],
+        "split": entry["split"],
+        "seed": manifest.get("seed"),
+        "model_hash": manifest.get("model_hash"),
+    }
+    wrong = [
+        f"{key} {meta.get(key)!r} != {value!r}"
+        for key, value in expected.items()
+        if meta.get(key) != value
+    ]
+    bounds = np.asarray([manifest.get("pose_low"), manifest.get("pose_high")], np.float32)
+    if not np.array_equal(bounds, np.stack([arrays["pose_low"], arrays["pose_high"]])):
+        wrong.append("pose bounds")
+    if wrong:
+        raise DatasetError(f"{path}: does not match {folder / MANIFEST_NAME}: {'; '.join(wrong)}")
+
+
+def save_folder(out_dir: str | os.PathLike, datasets: Mapping[str, Dataset]) -> list[Path]:
+    """Writes one run's datasets as a whole folder: ``out_dir/<name>`` for each and a manifest.
+
+    Everything is written into a temporary sibling folder, synced, and renamed into place at
+    the end; an earlier `out_dir` is moved aside and removed only then. Killed at any point, the
+    process leaves `out_dir` as it was (or, between the two renames, the earlier folder moved
+    aside, which the next run puts back), never a mix; `remove_stale_temporaries` tidies up.
+
+    Args:
+      out_dir: the run's folder. If it exists it must be one `check_output_folder` accepts.
+      datasets: file name (``*.npz``) -> dataset; all of one run (same seed, config, model hash
+        and pose bounds).
+
+    Returns:
+      The dataset paths, in the order of `datasets`.
+
+    Raises:
+      DatasetError: a dataset fails its checks, or the datasets are not one run.
+      FileExistsError, PermissionError: `out_dir` cannot hold a run (`check_output_folder`).
+    """
+    out_dir = Path(out_dir)
+    bad = [name for name in datasets if Path(name).name != name or not name.endswith(".npz")]
+    if bad or not datasets:
+        raise DatasetError(f"need plain *.npz file names, got {list(datasets)}")
+    check_output_folder(out_dir)
+    out_dir.parent.mkdir(parents=True, exist_ok=True)
+    remove_stale_temporaries(out_dir)
+    tmp = Path(
+        tempfile.mkdtemp(prefix=_temporary_prefix(out_dir), suffix=".tmp", dir=out_dir.parent)
+    )
+    try:
+        os.chmod(tmp, 0o777 & ~_umask())
+        for name, ds in datasets.items():
+            save_dataset(tmp / name, ds)
+        write_manifest(tmp)
+        _fsync_dir(tmp)
+        if out_dir.exists():
+            old = Path(
+                tempfile.mkdtemp(
+                    prefix=_temporary_prefix(out_dir), suffix=".old", dir=out_dir.parent
+                )
+            )
+            os.replace(out_dir, old)
+            try:
+                os.replace(tmp, out_dir)
+            except BaseException:
+                os.replace(old, out_dir)  # the earlier run goes back
+                raise
+            shutil.rmtree(old, ignore_errors=True)
+        else:
+            os.replace(tmp, out_dir)
+        _fsync_dir(out_dir.parent)
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise
+    return [out_dir / name for name in datasets]
+
+
+def _fsync_dir(folder: Path) -> None:
+    """Makes a folder's entries (new files, renames) durable."""
+    fd = os.open(folder, os.O_RDONLY)
+    try:
+        os.fsync(fd)
+    finally:
+        os.close(fd)
+
+
+def check_output_folder(out_dir: str | os.PathLike) -> Path:
+    """Checks, before any work, that `save_folder` may write (or replace) `out_dir`.
+
+    A folder that exists must hold only what a run writes (``*.npz`` files, the manifest, and
+    temporaries), since it is replaced as a whole; anything else would be deleted with it.
+
+    Returns:
+      `out_dir` as a Path.
+
+    Raises:
+      FileExistsError: `out_dir` is a file, or a folder holding other things (listed).
+      PermissionError: the nearest existing folder on its path is not writable.
+    """
+    out_dir = Path(out_dir)
+    if out_dir.exists() and not out_dir.is_dir():
+        raise FileExistsError(f"{out_dir} exists and is not a folder")
+    if out_dir.is_dir():
+        other = sorted(
+            entry.name
+            for entry in out_dir.iterdir()
+            if not entry.is_file()
+            or not (
+                entry.name.endswith(".npz")
+                or entry.name == MANIFEST_NAME
+                or (entry.name.startswith(".") and entry.name.endswith(".tmp"))
+            )
+        )
+        if other:
+            raise FileExistsError(
+                f"{out_dir} holds {other[:10]}, which are not babbling data; a run replaces its"
+                " folder as a whole, so choose another folder or empty this one"
+            )
+    existing = out_dir.parent
+    while not existing.exists() and existing != existing.parent:
+        existing = existing.parent
+    if not existing.is_dir():
+        raise FileExistsError(f"{existing} is not a folder, so {out_dir} cannot be made")
+    if not os.access(existing, os.W_OK | os.X_OK):
+        raise PermissionError(f"cannot write in {existing}, so not {out_dir} either")
+    return out_dir
+
+
 def _check(arrays: dict[str, np.ndarray], meta: dict[str, Any], where: str) -> None:
     """Raises DatasetError unless arrays and metadata are consistent."""
     problems = []
@@ -286,6 +629,8 @@ def _check(arrays: dict[str, np.ndarray], meta: dict[str, Any], where: str) -> N
         if arrays[key].shape != (POSE_DIM,):
             problems.append(f"{key} has shape {arrays[key].shape}, expected ({POSE_DIM},)")
     for key in _ARRAY_KEYS:
+        if arrays[key].dtype != np.float32:
+            continue  # reported above; isfinite may not even apply to it
         n_bad = int(np.size(arrays[key]) - np.count_nonzero(np.isfinite(arrays[key])))
         if n_bad:
             problems.append(f"{key} has {n_bad} non-finite value(s)")
@@ -303,5 +648,8 @@ def _check(arrays: dict[str, np.ndarray], meta: dict[str, Any], where: str) -> N
     ):
         if not isinstance(meta.get(key), kind):
             problems.append(f"metadata {key!r} missing or of the wrong type")
+    for key in ("domain_fields", "config"):
+        if not isinstance(meta.get(key, {}), dict):
+            problems.append(f"metadata {key!r} is not an object")
     if problems:
         raise DatasetError(f"{where}: " + "; ".join(problems))

@@ -2,8 +2,10 @@
 
 import mjx_arm  # noqa: I001  (before jax: it sets an XLA CPU flag)
 
+import argparse
 import dataclasses
 import os
+import re
 import subprocess
 import sys
 import zipfile
@@ -69,6 +71,12 @@ def test_config_checks():
         babble.BabbleConfig(backend="gpu")
     with pytest.raises(ValueError):
         babble.BabbleConfig(hold_min_s=2.0, hold_max_s=1.0)
+    with pytest.raises(ValueError, match="distinct domains"):
+        babble.BabbleConfig(domains=("source", "source"))
+    with pytest.raises(ValueError, match="unknown domain 'sea'"):
+        babble.BabbleConfig(domains=("source", "sea"))
+    with pytest.raises(ValueError, match="seed must be >= 0"):
+        babble.BabbleConfig(seed=-1)
     assert babble.PAPER.n_train == 50 and babble.PAPER.n_val == 3 and babble.PAPER.n_steps == 600
 
 
@@ -175,7 +183,7 @@ def test_cli_writes_one_file_per_domain_and_split(tmp_path, xml, monkeypatch):
     argv += ["--model", str(model), "--out", str(tmp_path / "out"), "--no-progress"]
     assert babble.main(argv) == 0
     files = sorted(p.name for p in (tmp_path / "out").iterdir())
-    assert files == ["source_train.npz", "source_val.npz"]
+    assert files == ["manifest.json", "source_train.npz", "source_val.npz"]
     d = dataset.load_dataset(tmp_path / "out" / "source_val.npz")
     assert d.pressures_bar.shape == (1, 10, 3) and d.seed == 3 and d.split == "val"
     expected = babble.make_programs(
@@ -308,3 +316,210 @@ def test_compilation_cache_is_on_for_accelerators_only(monkeypatch, tmp_path):
         assert jax.config.jax_compilation_cache_dir == str(tmp_path / "mine")
     finally:
         jax.config.update("jax_compilation_cache_dir", before)
+
+
+# ---------------------------------------------------------------------------------- whole folders
+
+SMALL = babble.BabbleConfig(n_train=2, n_val=1, duration_s=1.0, domains=("source",), backend="c")
+
+
+def _dead_pid() -> int:
+    """The pid of a process that has exited (a killed writer's temporaries carry one)."""
+    proc = subprocess.Popen([sys.executable, "-c", ""])
+    proc.wait()
+    return proc.pid
+
+
+def _contents(folder):
+    return {p.name: p.read_bytes() for p in sorted(folder.iterdir())}
+
+
+def test_run_replaces_its_folder_only_when_complete(tmp_path, xml, monkeypatch):
+    """Killed while saving, a run leaves the earlier folder whole; the next run tidies up."""
+    out = tmp_path / "out"
+    babble.run(SMALL, out, xml=xml, progress=False)
+    manifest = dataset.read_manifest(out)
+    assert manifest["seed"] == 0 and sorted(manifest["files"]) == [
+        "source_train.npz",
+        "source_val.npz",
+    ]
+    before = _contents(out)
+
+    saved = []
+
+    def interrupted_save(path, ds):
+        if saved:
+            raise KeyboardInterrupt  # the second file: as a Ctrl-C while saving
+        saved.append(path)
+        return save(path, ds)
+
+    save = dataset.save_dataset
+    monkeypatch.setattr(dataset, "save_dataset", interrupted_save)
+    with pytest.raises(KeyboardInterrupt):
+        babble.run(dataclasses.replace(SMALL, seed=7), out, xml=xml, progress=False)
+    monkeypatch.undo()
+    assert saved and _contents(out) == before  # the earlier run, untouched
+    assert os.listdir(tmp_path) == ["out"]  # and no temporary left beside it
+
+    # A SIGKILL leaves temporaries behind: a half-written folder beside, a file inside (as the
+    # file-by-file writer of old left them). Loading ignores them; the next run removes them.
+    dead = _dead_pid()
+    stale = tmp_path / f".out.{dead}.abc.tmp"
+    stale.mkdir()
+    (stale / "source_train.npz").write_bytes(before["source_train.npz"])
+    (out / f".source_val.npz.{dead}.def.tmp").write_bytes(b"PK half a zip")
+    assert dataset.load_dataset(out / "source_val.npz").seed == 0
+    paths = babble.run(dataclasses.replace(SMALL, seed=7), out, xml=xml, progress=False)
+    assert os.listdir(tmp_path) == ["out"]
+    assert sorted(os.listdir(out)) == ["manifest.json", "source_train.npz", "source_val.npz"]
+    assert [dataset.load_dataset(p).seed for p in paths] == [7, 7]
+
+
+def test_folder_refuses_a_mixed_or_partial_set(datasets, tmp_path):
+    names = {f"{d.domain}_{d.split}.npz": d for d in datasets}
+    a = dataset.save_folder(tmp_path / "a", names)[0].parent
+    other = {name: dataclasses.replace(d, seed=7) for name, d in names.items()}
+    b = dataset.save_folder(tmp_path / "b", other)[0].parent
+    for name in names:
+        assert dataset.load_dataset(a / name).seed == 0
+    manifest = dataset.read_manifest(a)
+    assert manifest["model_hash"] == datasets[0].model_hash and manifest["seed"] == 0
+    np.testing.assert_array_equal(np.float32(manifest["pose_low"]), datasets[0].pose_low)
+
+    # One file of another run (same size: only the seed differs) mixes the folder: every file
+    # of it is refused, not only the foreign one.
+    (a / "source_train.npz").write_bytes((b / "source_train.npz").read_bytes())
+    for name in ("source_train.npz", "constrained_val.npz"):
+        with pytest.raises(DatasetError, match=r"\['source_train.npz'\] differ"):
+            dataset.load_dataset(a / name)
+    (a / "source_train.npz").unlink()
+    with pytest.raises(DatasetError, match=r"missing \['source_train.npz'\]"):
+        dataset.load_dataset(a / "source_val.npz")
+    (a / "source_train.npz").write_bytes((b / "source_train.npz").read_bytes())
+    (b / "extra.npz").write_bytes((b / "source_val.npz").read_bytes())
+    with pytest.raises(DatasetError, match=r"not of the run \['extra.npz'\]"):
+        dataset.load_dataset(b / "source_val.npz")
+    with pytest.raises(DatasetError, match="extra.npz: not a file of the run"):
+        dataset.load_dataset(b / "extra.npz")
+    (b / "extra.npz").unlink()
+    with pytest.raises(DatasetError, match="would mix runs"):
+        dataset.save_dataset(b / "source_val.npz", datasets[1])
+    (b / "manifest.json").write_text('{"format": 1, "files": [')
+    with pytest.raises(DatasetError, match="unreadable manifest"):
+        dataset.load_dataset(b / "source_val.npz")
+    # Datasets of different runs cannot make one folder; nothing is written.
+    mixed = {"x.npz": datasets[0], "y.npz": dataclasses.replace(datasets[1], seed=7)}
+    with pytest.raises(DatasetError, match=r"not one babbling run.*\['seed'"):
+        dataset.save_folder(tmp_path / "c", mixed)
+    assert sorted(os.listdir(tmp_path)) == ["a", "b"]
+
+
+@pytest.mark.parametrize("folder", ["babble", "babble_aged"])
+def test_committed_datasets_load_and_match_their_manifests(folder):
+    """The committed folders' manifests are exactly what their files give (nothing invented)."""
+    path = mjx_arm.constants.ROOT / "data" / folder
+    manifest = dataset.read_manifest(path)
+    assert dataset.build_manifest(path) == manifest
+    for name, entry in manifest["files"].items():
+        if name.endswith("_val.npz"):
+            d = dataset.load_dataset(path / name, expected_model_hash=manifest["model_hash"])
+            assert (d.domain, d.split, d.seed) == (entry["domain"], "val", 0)
+
+
+def test_folders_without_a_manifest_load_file_by_file(datasets, tmp_path):
+    path = dataset.save_dataset(tmp_path / "legacy" / "source_val.npz", datasets[1])
+    (tmp_path / "legacy" / ".source_val.npz.123.tmp").write_bytes(b"stale")
+    assert dataset.load_dataset(path).split == "val"
+
+
+def test_every_damaged_bit_is_a_dataset_error(tmp_path):
+    """Flip each bit of a small dataset file: it loads unchanged or raises DatasetError naming
+    the file (zipfile alone raises RuntimeError, NotImplementedError, ... for some bits)."""
+    rng = np.random.default_rng(0)
+    d = dataset.Dataset(
+        pressures_bar=rng.uniform(0, 3.5, (1, 2, 3)).astype(np.float32),
+        poses=rng.uniform(-1, 1, (1, 2, 6)).astype(np.float32),
+        pose_low=np.full(6, -1, np.float32),
+        pose_high=np.ones(6, np.float32),
+        domain="source",
+        domain_fields={},
+        model_hash="0" * 16,
+        seed=0,
+    )
+    path = dataset.save_dataset(tmp_path / "flipped.npz", d)
+    good = path.read_bytes()
+    errors = {}
+    fd = os.open(path, os.O_RDWR)  # flipped in place: rewriting the file is slow on some disks
+    try:
+        for bit in range(len(good) * 8):
+            at = bit // 8
+            os.pwrite(fd, bytes([good[at] ^ (1 << (bit % 8))]), at)
+            try:
+                back = dataset.load_dataset(path)
+            except DatasetError as err:
+                assert str(err).startswith(str(path)), err
+                cause = type(err.__cause__).__name__
+                errors[cause] = errors.get(cause, 0) + 1
+                continue
+            finally:
+                os.pwrite(fd, good[at : at + 1], at)
+            _assert_same(back, d)
+    finally:
+        os.close(fd)
+    assert sum(errors.values()) > len(good) * 4  # most flips are caught
+    assert {"RuntimeError", "NotImplementedError"} & set(errors)  # the ones that escaped before
+
+
+def _assert_same(back, d):
+    """A damaged file that still loads must hold the same data (the flip hit an unused or
+    redundant field, e.g. a timestamp)."""
+    np.testing.assert_array_equal(back.poses, d.poses)
+    np.testing.assert_array_equal(back.pressures_bar, d.pressures_bar)
+    assert (back.domain, back.seed, back.model_hash) == (d.domain, d.seed, d.model_hash)
+
+
+# ---------------------------------------------------------------------------------- command line
+
+
+@pytest.mark.parametrize(
+    "argv, message",
+    [
+        (["--chunk", "0"], "--chunk: .*must be >= 1"),
+        (["--n", "-1"], "--n: .*must be >= 0"),
+        (["--n-val", "-2"], "--n-val: .*must be >= 0"),
+        (["--duration", "-1"], "--duration: .*> 0"),
+        (["--duration", "nan"], "--duration: .*> 0"),
+        (["--seed", "-1"], "--seed: .*must be >= 0"),
+        (["--domain", "source,source"], "distinct domains"),
+        (["--domain", "source,sea"], "unknown domain 'sea'"),
+        (["--n", "0", "--n-val", "0"], "not both 0"),
+        (["--hold-min", "2", "--hold-max", "1"], "hold_min_s <= hold_max_s"),
+        (["--model", "no/such.xml"], "no such MJCF file"),
+        (["--out", "{file}"], "exists and is not a folder"),
+        (["--out", "{busy}"], "notes.txt"),
+    ],
+)
+def test_cli_refuses_bad_options_before_simulating(argv, message, tmp_path, monkeypatch, capsys):
+    (tmp_path / "file").write_text("mine")
+    (tmp_path / "busy").mkdir()
+    (tmp_path / "busy" / "notes.txt").write_text("mine too")
+    argv = [a.format(file=tmp_path / "file", busy=tmp_path / "busy") for a in argv]
+    monkeypatch.setattr(babble, "babble", lambda *a, **k: pytest.fail("simulated first"))
+    with pytest.raises(SystemExit) as exit_:
+        babble.main(argv)
+    assert exit_.value.code == 2  # an argparse usage error
+    err = capsys.readouterr().err
+    assert "usage: python -m mjx_arm.babble" in err and re.search(message, err), err
+    assert (tmp_path / "file").read_text() == "mine"
+    assert sorted(os.listdir(tmp_path / "busy")) == ["notes.txt"]
+
+
+def test_cli_help_shows_every_option_with_its_default():
+    parser = babble.build_parser()
+    text = " ".join(parser.format_help().split())
+    assert parser.prog == "python -m mjx_arm.babble"
+    for action in parser._actions:
+        assert action.help, action.option_strings
+        if action.default not in (None, argparse.SUPPRESS):
+            assert f"(default: {action.default})" in text, action.option_strings
+    assert "(default: 50)" in text and "(default: None)" not in text
