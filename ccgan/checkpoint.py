@@ -28,6 +28,38 @@ class CheckpointError(RuntimeError):
     """A checkpoint is missing, corrupt, or does not match what the caller expects."""
 
 
+class CheckpointNotFoundError(CheckpointError, FileNotFoundError):
+    """No file at the checkpoint's path (both a CheckpointError and a FileNotFoundError)."""
+
+
+def _short(value: Any, limit: int = 60) -> str:
+    """repr(value), cut to `limit` characters: a garbled file must not flood the message."""
+    text = repr(value)
+    return text if len(text) <= limit else text[: limit - 3] + "..."
+
+
+def differences(stored: Any, wanted: Any, prefix: str = "") -> list[str]:
+    """The leaves where two JSON-like values differ, as "key: stored X, this run Y" lines.
+
+    Nested dicts are compared key by key (`prefix` names the parent, dotted), so a changed
+    config names the changed fields rather than printing both configs whole.
+    """
+    if isinstance(stored, dict) and isinstance(wanted, dict):
+        out = []
+        for key in sorted(set(stored) | set(wanted), key=str):
+            name = f"{prefix}.{key}" if prefix else str(key)
+            if key not in stored:
+                out.append(f"{name}: not stored, this run {_short(wanted[key])}")
+            elif key not in wanted:
+                out.append(f"{name}: stored {_short(stored[key])}, not in this run")
+            else:
+                out += differences(stored[key], wanted[key], name)
+        return out
+    if stored == wanted:
+        return []
+    return [f"{prefix or 'value'}: stored {_short(stored)}, this run {_short(wanted)}"]
+
+
 def fingerprint(*arrays) -> str:
     """Short sha256 of arrays (shape, dtype and bytes), to tie a checkpoint to its data."""
     h = hashlib.sha256()
@@ -79,21 +111,30 @@ def read(path: str | os.PathLike) -> tuple[dict, bytes]:
     """Reads and verifies a checkpoint; returns (meta, payload bytes).
 
     Raises:
-      CheckpointError: missing file, not a checkpoint, or payload hash mismatch.
+      CheckpointNotFoundError: no file at `path` (a CheckpointError and a FileNotFoundError).
+      CheckpointError: not a checkpoint, or payload hash mismatch. The message names the file
+        and the kind of damage, never the file's bytes.
     """
     path = Path(path)
-    if not path.exists():
-        raise CheckpointError(f"no checkpoint at {path}")
+    if not path.is_file():
+        raise CheckpointNotFoundError(f"no checkpoint at {path}")
     try:
         rec = msgpack.unpackb(path.read_bytes(), raw=False)
         fmt, meta, digest, payload = rec["format"], rec["meta"], rec["sha256"], rec["payload"]
     except Exception as err:  # msgpack raises several types on truncated/garbled input
-        raise CheckpointError(f"{path} is not a readable checkpoint ({err!r})") from err
+        # Only the exception's type: msgpack's messages (ExtraData) embed the undecoded bytes.
+        raise CheckpointError(
+            f"{path} is not a readable {FORMAT} checkpoint (truncated or not a checkpoint:"
+            f" {type(err).__name__})"
+        ) from None
     if fmt != FORMAT:
-        raise CheckpointError(f"{path} has format {fmt!r}, expected {FORMAT!r}")
-    if hashlib.sha256(payload).hexdigest() != digest:
+        raise CheckpointError(f"{path} has format {_short(fmt)}, expected {FORMAT!r}")
+    if not isinstance(payload, bytes) or hashlib.sha256(payload).hexdigest() != digest:
         raise CheckpointError(f"{path} is corrupt: payload sha256 does not match its header")
-    return json.loads(meta), payload
+    try:
+        return json.loads(meta), payload
+    except (TypeError, ValueError) as err:
+        raise CheckpointError(f"{path} has unreadable metadata ({type(err).__name__})") from None
 
 
 def load(
@@ -111,15 +152,17 @@ def load(
       (tree, meta).
 
     Raises:
-      CheckpointError: corrupt file, mismatched metadata, or mismatched tree structure.
+      CheckpointNotFoundError: no file at `path`.
+      CheckpointError: corrupt file, mismatched metadata (the message names each differing
+        field with its stored and expected value), or mismatched tree structure.
     """
     meta, payload = read(path)
     for key, want in (expect or {}).items():
         have = meta.get(key)
-        if json.loads(json.dumps(want, sort_keys=True)) != have:
-            raise CheckpointError(
-                f"{path} does not match this run: meta[{key!r}] is {have!r}, expected {want!r}"
-            )
+        want = json.loads(json.dumps(want, sort_keys=True))
+        if want != have:
+            diff = "; ".join(differences(have, want, key))
+            raise CheckpointError(f"{path} does not match this run: {diff}")
     try:
         state = serialization.msgpack_restore(payload)
         tree = state if target is None else serialization.from_state_dict(target, state)
