@@ -23,6 +23,65 @@ from ccgan.models import ForwardModel, Generator, forward_open_loop
 #: Where `load_translator()` looks when given no path (override with $CCGAN_TRANSLATOR).
 DEFAULT_PATH = Path(__file__).resolve().parent.parent / "results" / "ccgan" / "translator.ckpt"
 
+#: Commands `Translator.translate` accepts (bar): the valves take [0, 3.5]; a little slack for
+#: noise, and anything further out is in other units (kPa, psi, Pa) or garbage.
+PRESSURE_RANGE_BAR = (-0.5, 5.0)
+#: Largest tip distance from the origin (m) accepted: the arm is ~0.2 m long, so a pose beyond
+#: this is in millimetres or centimetres.
+MAX_TIP_DISTANCE_M = 2.0
+#: Largest |norm(d3) - 1| accepted: d3 is the tip's unit tangent.
+D3_NORM_TOLERANCE = 0.05
+
+
+def check_program(pressures_bar, poses) -> tuple[np.ndarray, np.ndarray]:
+    """Validates a D_s program before translation; returns float32 [T, 3] and [T, 6] copies.
+
+    G_c squashes whatever it is given into valid commands, so inputs in the wrong units or with
+    NaNs would come out as plausible-looking, wrong commands. Here they are refused instead.
+
+    Args:
+      pressures_bar: [T, 3] commands (bar).
+      poses: [T, 6] tip position (m) then unit d3.
+
+    Raises:
+      ValueError: naming the problem: shapes, an empty program, non-finite values (with the
+        first bad step), pressures outside PRESSURE_RANGE_BAR, tip positions farther than
+        MAX_TIP_DISTANCE_M from the origin, or d3 not of unit length.
+    """
+    p = np.asarray(pressures_bar, np.float32)
+    x = np.asarray(poses, np.float32)
+    if p.ndim != 2 or p.shape[1] != 3 or x.shape != (p.shape[0], 6):
+        raise ValueError(f"need pressures [T, 3] and poses [T, 6], got {p.shape}, {x.shape}")
+    if p.shape[0] == 0:
+        raise ValueError("empty program: pressures and poses have T = 0 steps")
+    for name, a in (("pressures", p), ("poses", x)):
+        bad = ~np.isfinite(a).all(axis=1)
+        if bad.any():
+            raise ValueError(
+                f"{name} have non-finite values (NaN or inf) at {int(bad.sum())} step(s),"
+                f" first at step {int(np.argmax(bad))}"
+            )
+    low, high = PRESSURE_RANGE_BAR
+    if p.min() < low or p.max() > high:
+        raise ValueError(
+            f"pressures span [{p.min():.4g}, {p.max():.4g}], outside the plausible"
+            f" [{low}, {high}] bar: pass bar (not kPa, psi or Pa)"
+        )
+    reach = float(np.linalg.norm(x[:, :3], axis=1).max())
+    if reach > MAX_TIP_DISTANCE_M:
+        raise ValueError(
+            f"tip positions reach {reach:.4g} from the origin, beyond {MAX_TIP_DISTANCE_M} m:"
+            " pass metres (not mm or cm)"
+        )
+    norm = np.linalg.norm(x[:, 3:], axis=1)
+    worst = int(np.argmax(np.abs(norm - 1.0)))
+    if abs(norm[worst] - 1.0) > D3_NORM_TOLERANCE:
+        raise ValueError(
+            f"poses[:, 3:6] must be the unit d3 director; its norm is {norm[worst]:.4g} at"
+            f" step {worst} (tolerance {D3_NORM_TOLERANCE})"
+        )
+    return p, x
+
 
 def save_translator(
     path,
@@ -32,8 +91,13 @@ def save_translator(
     config,
     forward_c_params=None,
     forward_model: ForwardModel | None = None,
+    model_hash: str | None = None,
 ) -> Path:
-    """Writes G_c (and optionally F_c), k and the pose bounds to one checkpoint file."""
+    """Writes G_c (and optionally F_c), k and the pose bounds to one checkpoint file.
+
+    `model_hash` (`mjx_arm.Arm.model_hash` of the arm the training data was simulated with) is
+    recorded when given, so later stages can refuse to refine the translator on another arm.
+    """
     fwd = forward_model or ForwardModel()
     tree = {"g_c": g_c_params}
     if forward_c_params is not None:
@@ -46,6 +110,8 @@ def save_translator(
         "forward": {"hidden": fwd.hidden, "fc": fwd.fc},
         "config": config.to_dict(),
     }
+    if model_hash is not None:
+        meta["model_hash"] = model_hash
     return checkpoint.save(path, tree, meta)
 
 
@@ -69,11 +135,11 @@ class Translator:
 
         Returns:
           (pressures_c [T * k, 3] bar: each translated command held k control periods, k).
+
+        Raises:
+          ValueError: the program fails `check_program` (shapes, NaN/inf, units).
         """
-        p = np.asarray(pressures_s, np.float32)
-        x = np.asarray(poses_s, np.float32)
-        if p.ndim != 2 or p.shape[1] != 3 or x.shape != (p.shape[0], 6):
-            raise ValueError(f"need pressures [T, 3] and poses [T, 6], got {p.shape}, {x.shape}")
+        p, x = check_program(pressures_s, poses_s)
         s = samples(p, x, self.bounds)[None]
         out = np.asarray(self.generator.apply(self.g_c_params, jnp.asarray(s)))[0]
         commands = denormalise_pressure(out[:, :PRESSURE_DIM]).astype(np.float64)
@@ -94,15 +160,29 @@ class Translator:
 
 
 def translator_path(path: str | os.PathLike | None = None) -> Path:
-    """The file `load_translator(path)` reads: path, else $CCGAN_TRANSLATOR, else DEFAULT_PATH."""
-    return Path(path or os.environ.get("CCGAN_TRANSLATOR", DEFAULT_PATH))
+    """The file `load_translator(path)` reads: path, else $CCGAN_TRANSLATOR, else DEFAULT_PATH.
+
+    Only None means "the default": an empty path is an error rather than a silent fall-back
+    to the default file (an unset shell variable in `--ccgan-path "$X"` would otherwise
+    evaluate the wrong translator). An empty $CCGAN_TRANSLATOR counts as unset.
+
+    Raises:
+      ValueError: `path` is an empty string.
+    """
+    if path is not None:
+        if not str(path):
+            raise ValueError("empty translator path; pass None for the default translator")
+        return Path(path)
+    return Path(os.environ.get("CCGAN_TRANSLATOR") or DEFAULT_PATH)
 
 
 def load_translator(path: str | os.PathLike | None = None) -> Translator:
     """Loads a translator written by `ccgan.train` (default: $CCGAN_TRANSLATOR or DEFAULT_PATH).
 
     Raises:
-      ccgan.checkpoint.CheckpointError: missing, corrupt, or not a translator file.
+      ValueError: `path` is an empty string.
+      FileNotFoundError: no file at the path (`checkpoint.CheckpointNotFoundError`, naming it).
+      ccgan.checkpoint.CheckpointError: corrupt, or not a translator file.
     """
     path = translator_path(path)
     return translator_from_checkpoint(checkpoint.load(path), path)
@@ -117,12 +197,17 @@ def translator_from_checkpoint(source: tuple[dict, dict], path="checkpoint") -> 
     tree, meta = source
     if meta.get("kind") != "translator":
         raise checkpoint.CheckpointError(f"{path} is not a translator checkpoint")
-    fwd = ForwardModel(**meta["forward"])
-    return Translator(
-        g_c_params=tree["g_c"],
-        k=int(meta["k"]),
-        bounds=PoseBounds.from_dict(meta["bounds"]),
-        generator=Generator(**meta["generator"]),
-        f_c_params=tree.get("f_c"),
-        forward_model=fwd,
-    )
+    k = meta.get("k")
+    if not isinstance(k, int) or isinstance(k, bool) or k < 1:
+        raise checkpoint.CheckpointError(f"{path}: hold factor k must be an int >= 1, got {k!r}")
+    try:
+        return Translator(
+            g_c_params=tree["g_c"],
+            k=k,
+            bounds=PoseBounds.from_dict(meta["bounds"]),
+            generator=Generator(**meta["generator"]),
+            f_c_params=tree.get("f_c"),
+            forward_model=ForwardModel(**meta["forward"]),
+        )
+    except (KeyError, TypeError) as err:
+        raise checkpoint.CheckpointError(f"{path}: incomplete translator file ({err!r})") from err
