@@ -35,15 +35,43 @@ LABELS = {
 }
 
 
+def save(fig, path: Path, mark: str | None = None) -> None:
+    """Lays out, marks and writes a figure, then closes it.
+
+    A run that is not the main job's (`eval.pipeline.run_mark`) carries `mark` in red across the
+    figure and in the PNG's "Comment" text, so none of its figures can pass for a committed one.
+    """
+    fig.tight_layout()
+    metadata = None
+    if mark:
+        fig.text(
+            0.5,
+            0.5,
+            mark,
+            ha="center",
+            va="center",
+            rotation=15,
+            fontsize=28,
+            color="red",
+            alpha=0.45,
+            weight="bold",
+            wrap=True,
+        )
+        metadata = {"Comment": mark}
+    fig.savefig(path, dpi=90, metadata=metadata)
+    plt.close(fig)
+
+
 def _xy(ax, poses, key, **kw):
     ax.plot(poses[:, 0] * CM, poses[:, 1] * CM, color=COLORS.get(key), label=LABELS.get(key), **kw)
 
 
-def paths_figure(shape: str, traj: dict, path: Path) -> None:
+def paths_figure(shape: str, traj: dict, path: Path, mark: str | None = None) -> None:
     """XY paths (left) and X, Y, Z against time (right) of the target and every method.
 
     Args:
       traj: {"target": [T, 6], "poses": {method: [T, 6]}} (m).
+      mark: see `save`.
     """
     fig = plt.figure(figsize=(12, 4.5))
     ax = fig.add_subplot(1, 2, 1)
@@ -52,7 +80,7 @@ def paths_figure(shape: str, traj: dict, path: Path) -> None:
         _xy(ax, poses, m, lw=1.2, ls="--" if m == "oracle" else "-")
     ax.set(xlabel="x (cm)", ylabel="y (cm)", title=f"{shape}: XY path", aspect="equal")
     ax.legend(fontsize=8)
-    t = np.arange(traj["target"].shape[0]) / 10.0
+    t = np.arange(traj["target"].shape[0]) / CONTROL_HZ
     for i, name in enumerate("xyz"):
         axi = fig.add_subplot(3, 2, 2 * (i + 1))
         axi.plot(t, traj["target"][:, i] * CM, color=COLORS["target"], lw=2)
@@ -61,12 +89,10 @@ def paths_figure(shape: str, traj: dict, path: Path) -> None:
         axi.set_ylabel(f"{name} (cm)")
         if i == 2:
             axi.set_xlabel("source time (s)")
-    fig.tight_layout()
-    fig.savefig(path, dpi=90)
-    plt.close(fig)
+    save(fig, path, mark)
 
 
-def error_bars_figure(table: dict, methods: list[str], path: Path) -> None:
+def error_bars_figure(table: dict, methods: list[str], path: Path, mark: str | None = None) -> None:
     """Grouped bars of mean X_err and phi_err (± std) per shape and method."""
     shapes = list(table)
     fig, axes = plt.subplots(1, 2, figsize=(12, 4))
@@ -86,12 +112,10 @@ def error_bars_figure(table: dict, methods: list[str], path: Path) -> None:
         ax.set_xticks(np.arange(len(shapes)), shapes, rotation=20)
         ax.set_ylabel(unit)
         ax.legend(fontsize=8)
-    fig.tight_layout()
-    fig.savefig(path, dpi=90)
-    plt.close(fig)
+    save(fig, path, mark)
 
 
-def noise_figure(trajectories: dict, results: dict, path: Path) -> None:
+def noise_figure(trajectories: dict, results: dict, path: Path, mark: str | None = None) -> None:
     """Per shape: XY paths of the first robustness method under each noise level (seed 0)."""
     shapes = [s for s in trajectories if "noise" in trajectories[s]]
     fig, axes = plt.subplots(2, max(1, len(shapes)), figsize=(3.6 * max(1, len(shapes)), 7))
@@ -121,12 +145,10 @@ def noise_figure(trajectories: dict, results: dict, path: Path) -> None:
             )
         ax.set(xlabel="noise std (normalised)", ylabel="X_err (cm)")
         ax.legend(fontsize=7)
-    fig.tight_layout()
-    fig.savefig(path, dpi=90)
-    plt.close(fig)
+    save(fig, path, mark)
 
 
-def periodicity_figure(trajectories: dict, path: Path) -> None:
+def periodicity_figure(trajectories: dict, path: Path, mark: str | None = None) -> None:
     """Per shape: XY paths of each repetition from rest (first robustness method)."""
     shapes = [s for s in trajectories if "repeats" in trajectories[s]]
     fig, axes = plt.subplots(1, max(1, len(shapes)), figsize=(3.6 * max(1, len(shapes)), 3.8))
@@ -140,25 +162,26 @@ def periodicity_figure(trajectories: dict, path: Path) -> None:
             ax.plot(poses[:, 0] * CM, poses[:, 1] * CM, lw=0.8, label=f"run {r + 1}")
         ax.set(title=f"{s} ({LABELS.get(method)})", xlabel="x (cm)", ylabel="y (cm)")
         ax.legend(fontsize=7)
-    fig.tight_layout()
-    fig.savefig(path, dpi=90)
-    plt.close(fig)
+    save(fig, path, mark)
 
 
-def write_all(trajectories: dict, results: dict, out_dir: Path) -> list[str]:
-    """Writes every figure under out_dir; returns their file names."""
+def write_all(
+    trajectories: dict, results: dict, out_dir: Path, mark: str | None = None
+) -> list[str]:
+    """Writes every figure under out_dir, each marked with `mark` (see `save`); returns their
+    file names."""
     out_dir = Path(out_dir)
     names = []
     for shape, traj in trajectories.items():
         name = f"shape_{shape}.png"
-        paths_figure(shape, traj, out_dir / name)
+        paths_figure(shape, traj, out_dir / name, mark)
         names.append(name)
-    error_bars_figure(results["table"], results["methods_run"], out_dir / "errors.png")
+    error_bars_figure(results["table"], results["methods_run"], out_dir / "errors.png", mark)
     names.append("errors.png")
     if results["noise"]:
-        noise_figure(trajectories, results, out_dir / "noise.png")
+        noise_figure(trajectories, results, out_dir / "noise.png", mark)
         names.append("noise.png")
     if results["periodicity"]:
-        periodicity_figure(trajectories, out_dir / "periodicity.png")
+        periodicity_figure(trajectories, out_dir / "periodicity.png", mark)
         names.append("periodicity.png")
     return names

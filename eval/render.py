@@ -83,7 +83,13 @@ def _ensure_offscreen_gl() -> None:
 
 
 def render_panel(
-    arm, qpos: np.ndarray, own_path: np.ndarray, target_path: np.ndarray, label: str, hw
+    arm,
+    qpos: np.ndarray,
+    own_path: np.ndarray,
+    target_path: np.ndarray,
+    label: str,
+    hw,
+    on_frame=None,
 ) -> list[np.ndarray]:
     """Frames [N, H, W, 3] uint8 of one arm at the given joint states.
 
@@ -92,6 +98,7 @@ def render_panel(
       own_path: [N, 3] the tip position (m) at each frame; its XY drawn in red up to the frame.
       target_path: [N, 3] the D_s target tip (m); its XY drawn in green up to the frame.
       hw: (height, width) pixels.
+      on_frame: called with no arguments after each frame (e.g. a progress bar's update).
     """
     m = arm.mj_model
     d = mujoco.MjData(m)
@@ -114,6 +121,8 @@ def render_panel(
             _add_trail(r.scene, target_path[: i + 1], GREEN)
             _add_trail(r.scene, own_path[: i + 1], RED)
             frames.append(_label(r.render(), label))
+            if on_frame is not None:
+                on_frame()
     return frames
 
 
@@ -127,33 +136,59 @@ def _ensure_ffmpeg() -> None:
         mediapy.set_ffmpeg(imageio_ffmpeg.get_ffmpeg_exe())
 
 
-def write_video(arm_s, arm_c, traj: dict, cfg, path: Path) -> Path:
-    """Three-panel MP4 for one shape: D_s | D_c translated | D_c untranslated.
+def video_plan(traj: dict, cfg) -> tuple[np.ndarray, list[str]]:
+    """(source steps [F] shown as frames, D_c panels' methods) of one shape's video.
 
-    The translated panel uses the first available translator, else the oracle, else stretch.
-    D_c panels are sampled at the end of each source step's k periods, so all panels share the
-    source time axis. Returns the path written.
+    The translated panel uses the first available translator, else the oracle, else stretch;
+    the untranslated panel follows it.
     """
     n_steps = traj["pressures_s"].shape[0]
     frame_every = max(1, int(round(10.0 * cfg.video_speedup / cfg.video_fps)))
     frames_at = np.arange(frame_every - 1, n_steps, frame_every)
-    qpos_s, poses_s = replay(arm_s, traj["pressures_s"])
-    target = poses_s[frames_at, :3]
-    panels = [render_panel(arm_s, qpos_s[frames_at], target, target, "D_s", cfg.video_panel_hw)]
     translated = next(
         (m for m in ("ccgan", "wcgan", "oracle", "stretch") if m in traj["commands"]), None
     )
-    for method, label in ((translated, f"D_c {translated}"), ("none", "D_c untranslated")):
-        if method is None or method not in traj["commands"]:
-            continue
+    methods = [m for m in (translated, "none") if m is not None and m in traj["commands"]]
+    return frames_at, methods
+
+
+def write_video(
+    arm_s, arm_c, traj: dict, cfg, path: Path, mark: str | None = None, on_frame=None
+) -> Path:
+    """Three-panel MP4 for one shape: D_s | D_c translated | D_c untranslated (`video_plan`).
+
+    D_c panels are sampled at the end of each source step's k periods, so all panels share the
+    source time axis. `mark` (a quick run's, `eval.pipeline.run_mark`) is added to every
+    panel's label; `on_frame` is called after each rendered panel frame. Returns the path.
+    """
+    frames_at, methods = video_plan(traj, cfg)
+    tag = " [quick run]" if mark else ""
+    qpos_s, poses_s = replay(arm_s, traj["pressures_s"])
+    target = poses_s[frames_at, :3]
+    panels = [
+        render_panel(
+            arm_s, qpos_s[frames_at], target, target, "D_s" + tag, cfg.video_panel_hw, on_frame
+        )
+    ]
+    for method in methods:
+        label = "D_c untranslated" if method == "none" else f"D_c {method}"
         k = traj["k"][method]
         qpos_c, poses_c = replay(arm_c, traj["commands"][method])
         n = min(len(frames_at), poses_c.shape[0] // k)
         at = (frames_at[:n] + 1) * k - 1
         panel = render_panel(
-            arm_c, qpos_c[at], poses_c[at, :3], target[:n], label, cfg.video_panel_hw
+            arm_c,
+            qpos_c[at],
+            poses_c[at, :3],
+            target[:n],
+            label + tag,
+            cfg.video_panel_hw,
+            on_frame,
         )
         panel += [panel[-1]] * (len(frames_at) - n)
+        if on_frame is not None:
+            for _ in range(len(frames_at) - n):
+                on_frame()
         panels.append(panel)
     frames = [np.concatenate(row, axis=1) for row in zip(*panels, strict=True)]
     _ensure_ffmpeg()
@@ -161,11 +196,19 @@ def write_video(arm_s, arm_c, traj: dict, cfg, path: Path) -> Path:
     return path
 
 
-def write_all(arm_s, arm_c, trajectories: dict, cfg, out_dir: Path) -> list[str]:
-    """One video per shape under out_dir; returns the file names."""
+def write_all(
+    arm_s, arm_c, trajectories: dict, cfg, out_dir: Path, mark: str | None = None
+) -> list[str]:
+    """One video per shape under out_dir, with a progress bar over rendered panel frames (the
+    main job's five 60 s videos take minutes); returns the file names."""
+    from tqdm import tqdm
+
+    plans = {shape: video_plan(traj, cfg) for shape, traj in trajectories.items()}
+    total = sum(len(at) * (1 + len(methods)) for at, methods in plans.values())
     names = []
-    for shape, traj in trajectories.items():
-        name = f"video_{shape}.mp4"
-        write_video(arm_s, arm_c, traj, cfg, Path(out_dir) / name)
-        names.append(name)
+    with tqdm(total=total, desc="rendering videos", unit="frame") as bar:
+        for shape, traj in trajectories.items():
+            name = f"video_{shape}.mp4"
+            write_video(arm_s, arm_c, traj, cfg, Path(out_dir) / name, mark, bar.update)
+            names.append(name)
     return names
