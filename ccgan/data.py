@@ -7,10 +7,16 @@ is windowed and shuffled on its own.
 
 Normalisation follows the paper: pressures are divided by 3.5 bar; every pose axis is mapped to
 [0, 1] with per-axis bounds that span the workspace of both domains (`PoseBounds`).
+
+On disk the arrays come from `mjx_arm.babble`'s dataset files; `read_domain` and
+`read_translation_files` load them through `mjx_arm.dataset.load_dataset` and refuse files that
+do not belong together (another domain, another arm, other program lengths or units).
 """
 
 from __future__ import annotations
 
+import os
+from collections.abc import Sequence
 from typing import NamedTuple
 
 import numpy as np
@@ -40,6 +46,14 @@ class PoseBounds(NamedTuple):
     @classmethod
     def from_dict(cls, d: dict) -> PoseBounds:
         return cls(np.asarray(d["low"], np.float64), np.asarray(d["high"], np.float64))
+
+
+def union_bounds(*bounds: PoseBounds) -> PoseBounds:
+    """The smallest bounds containing every given one ([6] each, dtype kept)."""
+    return PoseBounds(
+        np.minimum.reduce([np.asarray(b.low) for b in bounds]),
+        np.maximum.reduce([np.asarray(b.high) for b in bounds]),
+    )
 
 
 def pose_bounds(*poses: np.ndarray, margin: float = 0.05, min_span: float = 1e-3) -> PoseBounds:
@@ -277,3 +291,130 @@ def random_held_programs(
 def simulate(arm, pressures_bar: np.ndarray) -> np.ndarray:
     """Poses [N, T, 6] of programs [N, T, 3] (bar) on an `mjx_arm.Arm`, with MuJoCo C."""
     return np.asarray(arm.rollout(pressures_bar, backend="c"), np.float32)
+
+
+# ---------------------------------------------------------------------------------- dataset files
+
+#: The two data slots of a translation and the domains each accepts: D_s must be "source"; D_c
+#: any other domain ("constrained", "aged", a custom one).
+SLOTS = ("source", "constrained")
+
+
+class DomainData(NamedTuple):
+    """One slot's babbling files, checked to belong together and concatenated in order.
+
+    Attributes:
+      pressures_bar: [N, T, 3] float32 commands (bar) at 10 Hz, every file's trajectories.
+      poses: [N, T, 6] float32 tip position (m) then unit d3.
+      bounds: pose bounds spanning every file's stored ones ([6] float32 each).
+      domain: the files' domain name.
+      model_hash: `mjx_arm.Arm.model_hash` of the arm they were simulated with.
+      paths: the files, as given.
+    """
+
+    pressures_bar: np.ndarray
+    poses: np.ndarray
+    bounds: PoseBounds
+    domain: str
+    model_hash: str
+    paths: tuple[str, ...]
+
+
+def _listing(paths, values) -> str:
+    return ", ".join(f"{p} ({v})" for p, v in zip(paths, values, strict=True))
+
+
+def read_domain(
+    paths: Sequence[str | os.PathLike], slot: str | None = None, model_hash: str | None = None
+) -> DomainData:
+    """Loads one domain's babbling files with `mjx_arm.dataset.load_dataset` and checks them.
+
+    Files of one slot are concatenated (train first, then val: the last `n_val` trajectories
+    are held out), so they must come from one domain, one arm and one program length, at the
+    control rate and pressure scale this package assumes (10 Hz, pressures / 3.5 bar).
+
+    Args:
+      paths: .npz files written by `mjx_arm.babble` (`mjx_arm.dataset.save_dataset`).
+      slot: "source": every file must hold domain "source"; "constrained": any other domain;
+        None: either (the files must still agree with each other).
+      model_hash: `Arm.model_hash` of the arm the data must come from, or None.
+
+    Returns:
+      `DomainData`.
+
+    Raises:
+      mjx_arm.dataset.DatasetError: naming the files: a missing, truncated or corrupt file; a
+        domain wrong for the slot; files that mix domains, arms (model hashes: another MJCF,
+        e.g. another segment count) or program lengths; another control rate or pressure
+        scale. `ModelHashMismatchError` (a DatasetError) when a file's model hash is not
+        `model_hash`; its message names both hashes.
+    """
+    from mjx_arm import constants
+    from mjx_arm.dataset import DatasetError, load_dataset
+
+    if slot not in (None, *SLOTS):
+        raise ValueError(f"slot must be one of {SLOTS} or None, got {slot!r}")
+    names = tuple(str(p) for p in paths)
+    if not names:
+        raise DatasetError(f"no {slot or 'dataset'} files given")
+    sets = [load_dataset(p, expected_model_hash=model_hash) for p in paths]
+    domains = [d.domain for d in sets]
+    if slot == "source" and any(d != "source" for d in domains):
+        raise DatasetError(
+            "the source slot (--source) takes domain 'source' data only:"
+            f" {_listing(names, domains)}"
+        )
+    if slot == "constrained" and "source" in domains:
+        raise DatasetError(
+            "the constrained slot (--constrained) takes data of a non-source domain"
+            f" (constrained, aged, ...), not 'source': {_listing(names, domains)}"
+        )
+    for attr, what in (
+        ("domain", "domains"),
+        ("model_hash", "arms (model hashes differ: another MJCF, e.g. another segment count)"),
+        ("n_steps", "program lengths (control steps)"),
+    ):
+        values = [getattr(d, attr) for d in sets]
+        if len(set(values)) > 1:
+            raise DatasetError(f"{slot or 'the'} files mix {what}: {_listing(names, values)}")
+    for attr, want, what in (
+        ("control_hz", constants.CONTROL_HZ, "control rate (Hz)"),
+        ("pressure_scale_bar", P_MAX_BAR, "pressure scale (bar)"),
+    ):
+        values = [getattr(d, attr) for d in sets]
+        if any(v != want for v in values):
+            raise DatasetError(f"need a {what} of {want}: {_listing(names, values)}")
+    return DomainData(
+        pressures_bar=np.concatenate([d.pressures_bar for d in sets]),
+        poses=np.concatenate([d.poses for d in sets]),
+        bounds=union_bounds(*(PoseBounds(d.pose_low, d.pose_high) for d in sets)),
+        domain=sets[0].domain,
+        model_hash=sets[0].model_hash,
+        paths=names,
+    )
+
+
+def read_translation_files(
+    source: Sequence[str | os.PathLike],
+    constrained: Sequence[str | os.PathLike],
+    model_hash: str | None = None,
+) -> tuple[DomainData, DomainData]:
+    """Both slots' files (`read_domain` each), which must come from one arm.
+
+    The two domains put the same MJCF in different media, so their model hashes agree; files of
+    two different arms would train a translator between the wrong worlds.
+
+    Raises:
+      mjx_arm.dataset.DatasetError: as `read_domain`, or the slots' model hashes differ.
+    """
+    from mjx_arm.dataset import DatasetError
+
+    d_s = read_domain(source, "source", model_hash)
+    d_c = read_domain(constrained, "constrained", model_hash)
+    if d_s.model_hash != d_c.model_hash:
+        raise DatasetError(
+            "source and constrained files come from different arms (model hashes differ:"
+            f" another MJCF, e.g. another segment count): {', '.join(d_s.paths)}"
+            f" ({d_s.model_hash}) vs {', '.join(d_c.paths)} ({d_c.model_hash})"
+        )
+    return d_s, d_c

@@ -17,10 +17,17 @@ the tracking error on held-out D_s trajectories.
 from __future__ import annotations
 
 import argparse
+import ast
 import csv
 import dataclasses
+import inspect
 import json
+import math
+import numbers
+import operator
 import os
+import re
+import textwrap
 from pathlib import Path
 from typing import Any, NamedTuple
 
@@ -33,7 +40,7 @@ from jax.sharding import Mesh, NamedSharding
 from jax.sharding import PartitionSpec as P
 
 from ccgan import checkpoint, losses
-from ccgan.data import PRESSURE_DIM, PoseBounds, TranslationData
+from ccgan.data import PRESSURE_DIM, TranslationData, read_domain
 from ccgan.forward import ForwardConfig
 from ccgan.fused_feedback import fused_weights, make_forward_stretched_fused
 from ccgan.models import (
@@ -43,6 +50,260 @@ from ccgan.models import (
     forward_stretched,
     forward_stretched_masked,
 )
+
+# ---------------------------------------------------------------------------------- settings
+
+#: The feedback rollouts `TrainConfig.feedback_impl` can name.
+FEEDBACK_IMPLS = ("auto", "cell", "lean", "lean_reduce", "pallas")
+
+
+class ConfigError(ValueError):
+    """A settings field holds a value the code cannot use.
+
+    Raised by the config dataclasses' `__post_init__`, so the Python API and the command line
+    refuse the same values; `config_from_args` turns it into a usage error naming the flag.
+
+    Attributes:
+      field: the offending field.
+      problem: what is wrong, a phrase that follows the field's name ("must be >= 1, got 0").
+    """
+
+    def __init__(self, field: str, problem: str):
+        super().__init__(f"{field} {problem}")
+        self.field, self.problem = field, problem
+
+
+_BOUND_CHECKS = ((">=", operator.ge), (">", operator.gt), ("<", operator.lt))
+
+
+def check_fields(
+    config,
+    at_least: dict[str, float] | None = None,
+    above: dict[str, float] | None = None,
+    below: dict[str, float] | None = None,
+) -> None:
+    """Refuses fields of `config` that are not finite numbers within their bounds.
+
+    A tuple field is checked element by element and must not be empty. Values traced by JAX
+    (`ccgan.tune` passes hyperparameters into a jitted `dataclasses.replace`) are skipped: they
+    were checked when concrete.
+
+    Args:
+      config: a dataclass instance.
+      at_least: {field: lowest allowed value}.
+      above: {field: a bound the value must exceed}.
+      below: {field: a bound the value must stay under}.
+
+    Raises:
+      ConfigError: the first field out of range, with its value.
+    """
+    for (word, ok), rules in zip(_BOUND_CHECKS, (at_least, above, below), strict=True):
+        for name, bound in (rules or {}).items():
+            value = getattr(config, name)
+            many = isinstance(value, tuple | list)
+            if many and not value:
+                raise ConfigError(name, "must not be empty")
+            for v in value if many else (value,):
+                if isinstance(v, jax.core.Tracer):
+                    continue
+                if (
+                    isinstance(v, bool)
+                    or not isinstance(v, numbers.Real | np.ndarray | jax.Array)
+                    or not math.isfinite(float(v))
+                    or not ok(float(v), bound)
+                ):
+                    each = "each " if many else ""
+                    raise ConfigError(
+                        name, f"must be {each}a finite number {word} {bound}, got {value!r}"
+                    )
+
+
+def _first_sentence(text: str) -> str:
+    text = " ".join(text.split())
+    return re.split(r'(?<=[a-z0-9)\]])\.\s+(?=[A-Z"`])', text, maxsplit=1)[0]
+
+
+def field_docs(cls) -> dict[str, str]:
+    """{field: the first sentence of its documentation} for a dataclass, for `--help`.
+
+    A field is documented by `#:` comment lines right above it or by a string right below it
+    (both styles occur in this package); the documentation stays in one place, the class.
+    """
+    src = textwrap.dedent(inspect.getsource(cls))
+    lines = src.splitlines()
+    body = next(n for n in ast.parse(src).body if isinstance(n, ast.ClassDef)).body
+    docs = {}
+    for i, node in enumerate(body):
+        if not (isinstance(node, ast.AnnAssign) and isinstance(node.target, ast.Name)):
+            continue
+        after = body[i + 1] if i + 1 < len(body) else None
+        if isinstance(after, ast.Expr) and isinstance(after.value, ast.Constant):
+            text = str(after.value.value)
+        else:
+            comments, j = [], node.lineno - 2
+            while j >= 0 and lines[j].strip().startswith("#:"):
+                comments.insert(0, lines[j].strip()[2:])
+                j -= 1
+            text = " ".join(comments)
+        docs[node.target.id] = _first_sentence(text)
+    return docs
+
+
+class HelpFormatter(argparse.ArgumentDefaultsHelpFormatter):
+    """Shows each option's default, except where there is none to show (None, a switch off)."""
+
+    def _get_help_string(self, action):
+        if action.default is None or (action.nargs == 0 and action.default is False):
+            return action.help
+        return super()._get_help_string(action)
+
+
+def cli_parser(module: str, doc: str) -> argparse.ArgumentParser:
+    """The parser of `python -m <module>`: its name, the first line of `doc`, shown defaults."""
+    return argparse.ArgumentParser(
+        prog=f"python -m {module}",
+        description=doc.strip().splitlines()[0],
+        formatter_class=HelpFormatter,
+    )
+
+
+def add_config_flags(
+    parser: argparse.ArgumentParser,
+    cls,
+    skip: tuple[str, ...] = (),
+    prefix: str = "",
+    choices: dict[str, tuple] | None = None,
+) -> None:
+    """Adds one flag per field of the dataclass `cls`: `--<prefix><field-name>`.
+
+    Each flag's help is the field's documentation (`field_docs`), its default the field's;
+    bools become switches, tuples take several values. Read them back with `config_from_args`.
+
+    Args:
+      parser: the parser (the flags go into a group named after `cls`).
+      cls: a dataclass with defaults.
+      skip: fields without a flag (they keep their defaults).
+      prefix: flag prefix, e.g. "forward-" for `--forward-epochs`.
+      choices: {field: allowed values}.
+    """
+    docs = field_docs(cls)
+    doc = (cls.__doc__ or "").strip().splitlines()
+    group = parser.add_argument_group(cls.__name__, doc[0] if doc else None)
+    for f in dataclasses.fields(cls):
+        if f.name in skip:
+            continue
+        flag = "--" + (prefix + f.name).replace("_", "-")
+        kw = {
+            "dest": (prefix + f.name).replace("-", "_"),
+            "default": f.default,
+            "help": docs.get(f.name, "").replace("%", "%%") or f.name.replace("_", " "),
+        }
+        if f.type in ("bool", bool):
+            group.add_argument(flag, action="store_true", **kw)
+        elif "tuple" in str(f.type):
+            typ = float if "float" in str(f.type) else int
+            # tuple[float, float] takes exactly two values; tuple[int, ...] one or more.
+            nargs = "+" if "..." in str(f.type) else str(f.type).count(",") + 1
+            group.add_argument(flag, type=typ, nargs=nargs, **kw | {"default": list(f.default)})
+        else:
+            typ = {"int": int, "float": float}.get(str(f.type), type(f.default))
+            group.add_argument(flag, type=typ, choices=(choices or {}).get(f.name), **kw)
+
+
+def config_from_args(
+    parser: argparse.ArgumentParser,
+    args,
+    cls,
+    skip: tuple[str, ...] = (),
+    prefix: str = "",
+    check=None,
+):
+    """The `cls` instance of flags added by `add_config_flags`; invalid values are usage errors.
+
+    Args:
+      parser, args: the parser and its parsed arguments.
+      cls, skip, prefix: as given to `add_config_flags`.
+      check: optional callable(config) raising ConfigError, for classes without their own.
+
+    Returns:
+      The config. A `ConfigError` (from the class or `check`) exits with `parser.error`
+      (status 2) naming the flag, before the caller starts any work.
+    """
+    kw = {}
+    for f in dataclasses.fields(cls):
+        if f.name not in skip:
+            v = getattr(args, (prefix + f.name).replace("-", "_"))
+            kw[f.name] = tuple(v) if isinstance(v, list) else v
+    try:
+        config = cls(**kw)
+        if check is not None:
+            check(config)
+    except ConfigError as err:
+        parser.error(f"--{(prefix + err.field).replace('_', '-')} {err.problem}")
+    return config
+
+
+def check_forward_config(config: ForwardConfig) -> None:
+    """Refuses forward-model settings that cannot train (`ForwardConfig` has no checks).
+
+    Raises:
+      ConfigError: epochs, batch_size, hidden or fc < 1; lr <= 0; weight_decay < 0.
+    """
+    check_fields(
+        config,
+        at_least={"epochs": 1, "batch_size": 1, "hidden": 1, "fc": 1, "weight_decay": 0},
+        above={"lr": 0},
+    )
+
+
+def check_output_dir(parser: argparse.ArgumentParser, flag: str, path) -> None:
+    """Usage error unless `path` is a folder or can be made one (no file on its way)."""
+    for part in (Path(path), *Path(path).parents):
+        if part.exists() and not part.is_dir():
+            parser.error(f"{flag} {path}: {part} exists and is not a folder")
+
+
+def add_data_flags(parser: argparse.ArgumentParser) -> None:
+    """--source, --constrained (babbling .npz files) and --model; read with `data_from_args`."""
+    parser.add_argument(
+        "--source", nargs="+", required=True, help="D_s dataset files (train, then val)"
+    )
+    parser.add_argument(
+        "--constrained",
+        nargs="+",
+        required=True,
+        help="D_c dataset files (train, then val) of one non-source domain: constrained, aged...",
+    )
+    parser.add_argument(
+        "--model",
+        default=None,
+        help="MJCF of the arm the data must come from (its model hash is checked);"
+        " default: any, as long as every file agrees",
+    )
+
+
+def data_from_args(parser: argparse.ArgumentParser, args):
+    """The (D_s, D_c) `ccgan.data.DomainData` of `add_data_flags`' flags.
+
+    Unreadable, mixed or wrong-arm files and an unloadable --model are usage errors (status 2)
+    with the message naming the files, instead of a traceback.
+    """
+    import mjx_arm
+    from ccgan.data import read_translation_files
+    from mjx_arm.dataset import DatasetError, ModelHashMismatchError
+
+    model_hash = None
+    if args.model is not None:
+        try:
+            model_hash = mjx_arm.load(args.model).model_hash
+        except (FileNotFoundError, ValueError) as err:
+            parser.error(f"--model {args.model}: {err}")
+    try:
+        return read_translation_files(args.source, args.constrained, model_hash)
+    except ModelHashMismatchError as err:
+        parser.error(f"{err} (--model {args.model} has model hash {model_hash})")
+    except DatasetError as err:
+        parser.error(str(err))
 
 
 @dataclasses.dataclass(frozen=True)
@@ -63,8 +324,9 @@ class TrainConfig:
     lr_generator: float = 1e-4
     #: Critic learning rate (paper: 2e-4).
     lr_critic: float = 2e-4
-    #: AdamW betas (paper: 0.5, 0.999).
+    #: AdamW first-moment decay beta1 (paper: 0.5).
     beta1: float = 0.5
+    #: AdamW second-moment decay beta2 (paper: 0.999).
     beta2: float = 0.999
     #: AdamW decoupled weight decay (paper: unstated; PyTorch's AdamW default 1e-2).
     weight_decay: float = 1e-2
@@ -88,10 +350,10 @@ class TrainConfig:
     gen_unroll: int = 10
     #: F_c periods per loop iteration in the feedback rollout and the choice of k.
     feedback_unroll: int = 25
-    #: The feedback rollout: "lean", "lean_reduce" or "cell" (`models.forward_stretched`),
-    #: "pallas" (two fused Triton kernels, `ccgan.fused_feedback`; slower on the GPU:
-    #: bench/feedback.py), or "auto": "lean_reduce" on a GPU (12% faster training on an H200),
-    #: "lean" elsewhere (lean_reduce is 8x slower on a 2-core CPU); measured in
+    #: The feedback rollout: "auto" is "lean_reduce" on a GPU, "lean" elsewhere. "lean",
+    #: "lean_reduce" and "cell" are `models.forward_stretched`'s; "pallas" runs two fused Triton
+    #: kernels (`ccgan.fused_feedback`; slower on the GPU: bench/feedback.py). "lean_reduce"
+    #: trains 12% faster on an H200 and is 8x slower on a 2-core CPU, as measured in
     #: bench/results/h200/profile_step_dedup.md and bench/results/cpu/train_feedback_impls.md.
     feedback_impl: str = "auto"
     #: WCGAN-GP baseline: one generator and one critic on D_c only, no cycle/identity loss.
@@ -104,6 +366,45 @@ class TrainConfig:
     gen_fc: int = 128
     #: Critic Conv1D widths (five layers).
     critic_features: tuple[int, ...] = (32, 64, 64, 128, 128)
+
+    def __post_init__(self):
+        """Refuses settings that would fail late or train nothing (ConfigError names the field).
+
+        A window of one step makes the instance-norm critic's output constant, so the critic
+        and adversarial losses are exactly 0: window_length must be >= 2.
+        """
+        check_fields(
+            self,
+            at_least={
+                "epochs": 1,
+                "batch_size": 1,
+                "window_length": 2,
+                "window_stride": 0,
+                "n_val": 1,
+                "beta1": 0,
+                "beta2": 0,
+                "weight_decay": 0,
+                "lambda_cycle": 0,
+                "lambda_identity": 0,
+                "lambda_feedback": 0,
+                "lambda_gp": 0,
+                "stretch_choices": 1,
+                "stretch_every": 1,
+                "val_window_length": 0,
+                "gen_unroll": 1,
+                "feedback_unroll": 1,
+                "checkpoint_every": 1,
+                "gen_hidden": 1,
+                "gen_fc": 1,
+                "critic_features": 1,
+            },
+            above={"lr_generator": 0, "lr_critic": 0},
+            below={"beta1": 1, "beta2": 1},
+        )
+        if self.feedback_impl not in FEEDBACK_IMPLS:
+            raise ConfigError(
+                "feedback_impl", f"must be one of {FEEDBACK_IMPLS}, got {self.feedback_impl!r}"
+            )
 
     @property
     def stride(self) -> int:
@@ -185,9 +486,6 @@ def _mesh_constraint(batch_size: int):
     return lambda x: jax.lax.with_sharding_constraint(x, sharding)
 
 
-FEEDBACK_IMPLS = ("auto", "cell", "lean", "lean_reduce", "pallas")
-
-
 def resolved_feedback_impl(impl: str) -> str:
     """ "auto" -> "lean_reduce" on a GPU, "lean" elsewhere; any other name unchanged."""
     if impl != "auto":
@@ -197,8 +495,6 @@ def resolved_feedback_impl(impl: str) -> str:
 
 def _feedback_rollout(config: TrainConfig, fwd: ForwardModel, forward_c_params):
     """`(commands [B, L, 3], pose0 [B, 6], k) -> F_c poses [B, L, 6]`, held k periods each."""
-    if config.feedback_impl not in FEEDBACK_IMPLS:
-        raise ValueError(f"feedback_impl must be one of {FEEDBACK_IMPLS}: {config.feedback_impl!r}")
     impl = resolved_feedback_impl(config.feedback_impl)
     if impl == "pallas":
         weights = fused_weights(forward_c_params)
@@ -214,6 +510,28 @@ def _feedback_rollout(config: TrainConfig, fwd: ForwardModel, forward_c_params):
         config.feedback_unroll,
         impl=impl,
     )
+
+
+def check_data(config: TrainConfig, data: TranslationData) -> int:
+    """Checks that `data` suits `config`; returns the train steps per epoch.
+
+    Raises:
+      ValueError: the windows are not config.window_length long, or there are fewer training
+        windows in a domain than one batch.
+    """
+    src = data.constrained if config.baseline else data.source
+    n_in, n_c = src.train.shape[0], data.constrained.train.shape[0]
+    if src.train.shape[1] != config.window_length or (
+        data.constrained.train.shape[1] != config.window_length
+    ):
+        raise ValueError("data windows do not match config.window_length")
+    steps = min(n_in, n_c) // config.batch_size
+    if steps < 1:
+        raise ValueError(
+            f"too few training windows ({n_in} D_s, {n_c} D_c) for batch size"
+            f" {config.batch_size}: lower the batch size or window length, or add data"
+        )
+    return steps
 
 
 def make_trainer(
@@ -244,15 +562,11 @@ def make_trainer(
 
     # The generator's input domain: D_s for CCGAN; D_c only for the WCGAN-GP baseline.
     src = data.constrained if config.baseline else data.source
+    steps = check_data(config, data)
     x_in, prev_in = jnp.asarray(src.train), jnp.asarray(src.train_prev_pose)
     x_c = jnp.asarray(data.constrained.train)
-    if x_in.shape[1] != config.window_length or x_c.shape[1] != config.window_length:
-        raise ValueError("data windows do not match config.window_length")
     n_in, n_c = x_in.shape[0], x_c.shape[0]
     batch = config.batch_size
-    steps = min(n_in, n_c) // batch
-    if steps < 1:
-        raise ValueError(f"too few windows ({n_in}, {n_c}) for batch size {batch}")
     val = jnp.asarray(data.source.val)
     val_prev = jnp.asarray(data.source.val_prev_pose)
     # Held-out windows for the choice of k: [n_val * W, L_val] (a trailing partial window is
@@ -515,6 +829,7 @@ def train_and_evaluate(
     resume: bool = True,
     max_chunks: int | None = None,
     progress: bool = True,
+    model_hash: str | None = None,
 ):
     """Trains one or several seeds (vmapped), with a CSV log, checkpoints and a translator file.
 
@@ -528,7 +843,9 @@ def train_and_evaluate(
       seeds: PRNG seeds, trained together with vmap.
       resume: continue from `workdir/state.ckpt` if present (it must match config, data and seeds).
       max_chunks: stop after this many chunks (to test resumption); None runs to the end.
-      progress: show a tqdm bar over chunks.
+      progress: show a tqdm bar over epochs.
+      model_hash: `Arm.model_hash` of the arm the data comes from, recorded in the translator
+        files (`ccgan.finetune` and `ccgan.distill` refuse to refine them on another arm).
 
     Returns:
       (state with a leading seed axis, rows of the metrics CSV).
@@ -600,85 +917,114 @@ def train_and_evaluate(
                     config,
                     forward_c_params,
                     forward_model,
+                    model_hash=model_hash,
                 )
     return state, rows
 
 
 def load_npz(*paths: str | os.PathLike):
-    """Concatenated (pressures [N, T, 3] bar, poses [N, T, 6], bounds or None) from .npz files.
+    """Concatenated (pressures [N, T, 3] bar, poses [N, T, 6], bounds) of one domain's files.
 
-    Each file holds "pressures_bar" (or "pressures") and "poses", as `mjx_arm.babble` writes them;
-    list the validation file last (the last `n_val` trajectories are held out). When the files
-    carry "pose_low"/"pose_high" the first file's bounds are returned.
+    The files are read and checked by `ccgan.data.read_domain` (one domain, one arm, one program
+    length; a corrupt file raises `mjx_arm.dataset.DatasetError` naming it); the bounds span
+    every file's. List the validation file last (the last `n_val` trajectories are held out).
     """
-    ps, xs, bounds = [], [], None
-    for path in paths:
-        with np.load(path) as f:
-            ps.append(np.asarray(f["pressures_bar"] if "pressures_bar" in f else f["pressures"]))
-            xs.append(np.asarray(f["poses"]))
-            if bounds is None and "pose_low" in f and "pose_high" in f:
-                bounds = PoseBounds(np.asarray(f["pose_low"]), np.asarray(f["pose_high"]))
-    return np.concatenate(ps), np.concatenate(xs), bounds
+    d = read_domain(paths)
+    return d.pressures_bar, d.poses, d.bounds
+
+
+def train_forward_models(fconf: ForwardConfig, data: TranslationData, workdir: Path, progress=True):
+    """Trains F_s and F_c, writes `forward_{s,c}.ckpt` and `forward_metrics.json` to workdir.
+
+    F_s is not used by the CCGAN; it is trained for the report, as in the paper. Each model's
+    epochs run as one compiled scan, so the bar advances per model (minutes each on a CPU at
+    the default 300 epochs).
+    """
+    from tqdm.auto import tqdm
+
+    from ccgan import forward as forward_lib
+
+    f_meta = {"config": dataclasses.asdict(fconf), "data": data_fingerprint(data)}
+    report = {}
+    models = (("forward_s", data.source), ("forward_c", data.constrained))
+    bar = tqdm(models, desc="forward models", unit="model", disable=not progress)
+    for name, split in bar:
+        bar.set_postfix_str(f"{name}, {fconf.epochs} epochs")
+        params, hist, metrics = forward_lib.train_forward(fconf, split, data.bounds)
+        checkpoint.save(workdir / f"{name}.ckpt", params, f_meta)
+        report[name] = metrics | {"final_loss": float(hist[-1])}
+        bar.write(f"{name} {json.dumps(report[name])}")
+    bar.close()
+    (workdir / "forward_metrics.json").write_text(json.dumps(report, indent=2))
+    return report
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The options of `python -m ccgan.train`."""
+    parser = cli_parser("ccgan.train", __doc__)
+    add_data_flags(parser)
+    parser.add_argument(
+        "--workdir",
+        default="results/ccgan/run",
+        help="output folder: state.ckpt, metrics.csv, forward_*.ckpt, translator*.ckpt",
+    )
+    parser.add_argument(
+        "--seeds", type=int, nargs="+", default=[0], help="PRNG seeds, trained together"
+    )
+    parser.add_argument(
+        "--no-resume",
+        action="store_true",
+        help="train afresh instead of continuing from the workdir's checkpoints",
+    )
+    parser.add_argument("--no-progress", action="store_true", help="no progress bars")
+    add_config_flags(parser, ForwardConfig, prefix="forward-")
+    add_config_flags(parser, TrainConfig, choices={"feedback_impl": FEEDBACK_IMPLS})
+    return parser
 
 
 def main(argv=None) -> None:
-    """CLI: `python -m ccgan.train --source S.npz --constrained C.npz --workdir DIR [...]`."""
-    from ccgan import data as data_lib
-    from ccgan import forward as forward_lib
+    """CLI: `python -m ccgan.train --source S.npz... --constrained C.npz... --workdir DIR [...]`.
 
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument(
-        "--source", nargs="+", required=True, help="D_s .npz files (train, then val)"
-    )
-    parser.add_argument(
-        "--constrained", nargs="+", required=True, help="D_c .npz files (train, then val)"
-    )
-    parser.add_argument("--workdir", default="results/ccgan/run")
-    parser.add_argument("--seeds", type=int, nargs="+", default=[0])
-    parser.add_argument("--forward-epochs", type=int, default=ForwardConfig.epochs)
-    parser.add_argument("--no-resume", action="store_true")
-    for f in dataclasses.fields(TrainConfig):
-        flag = "--" + f.name.replace("_", "-")
-        if f.type in ("bool", bool):
-            parser.add_argument(flag, action="store_true", default=f.default)
-        elif "tuple" in str(f.type):
-            parser.add_argument(flag, type=int, nargs="+", default=list(f.default))
-        else:
-            typ = {"int": int, "float": float}.get(str(f.type), type(f.default))
-            parser.add_argument(flag, type=typ, default=f.default)
+    Every option and every data file is checked before anything is computed or written; a bad
+    one exits with status 2 and a message naming it.
+    """
+    from ccgan import data as data_lib
+
+    parser = build_parser()
     args = parser.parse_args(argv)
+    config = config_from_args(parser, args, TrainConfig)
+    fconf = config_from_args(
+        parser, args, ForwardConfig, prefix="forward-", check=check_forward_config
+    )
+    if len(set(args.seeds)) != len(args.seeds):
+        parser.error(f"--seeds must be distinct, got {args.seeds}")
+    check_output_dir(parser, "--workdir", args.workdir)
+    d_s, d_c = data_from_args(parser, args)
+
     from mjx_arm.machine import enable_compilation_cache
 
+    try:
+        data = data_lib.prepare(
+            d_s.pressures_bar,
+            d_s.poses,
+            d_c.pressures_bar,
+            d_c.poses,
+            config.window_length,
+            config.n_val,
+            config.stride,
+            bounds=data_lib.union_bounds(d_s.bounds, d_c.bounds),
+        )
+        check_data(config, data)
+    except ValueError as err:
+        parser.error(f"the data do not suit the options: {err}")
     enable_compilation_cache()
-    config = TrainConfig(
-        **{
-            f.name: tuple(getattr(args, f.name))
-            if isinstance(getattr(args, f.name), list)
-            else getattr(args, f.name)
-            for f in dataclasses.fields(TrainConfig)
-        }
-    )
-    ps, xs, bounds = load_npz(*args.source)
-    pc, xc, _ = load_npz(*args.constrained)
-    data = data_lib.prepare(
-        ps, xs, pc, xc, config.window_length, config.n_val, config.stride, bounds=bounds
-    )
     workdir = Path(args.workdir)
-    fconf = forward_lib.ForwardConfig(epochs=args.forward_epochs)
+    workdir.mkdir(parents=True, exist_ok=True)
     f_meta = {"config": dataclasses.asdict(fconf), "data": data_fingerprint(data)}
     fc_path = workdir / "forward_c.ckpt"
-    report = {}
-    if fc_path.exists() and not args.no_resume:
-        fc_params, _ = checkpoint.load(fc_path, expect=f_meta)
-    else:
-        # F_s is not used by the CCGAN; it is trained for the report, as in the paper.
-        for name, split in (("forward_s", data.source), ("forward_c", data.constrained)):
-            params, hist, metrics = forward_lib.train_forward(fconf, split, data.bounds)
-            checkpoint.save(workdir / f"{name}.ckpt", params, f_meta)
-            report[name] = metrics | {"final_loss": float(hist[-1])}
-            print(name, json.dumps(report[name]))
-        (workdir / "forward_metrics.json").write_text(json.dumps(report, indent=2))
-        fc_params, _ = checkpoint.load(fc_path, expect=f_meta)
+    if args.no_resume or not fc_path.exists():
+        train_forward_models(fconf, data, workdir, progress=not args.no_progress)
+    fc_params, _ = checkpoint.load(fc_path, expect=f_meta)
     train_and_evaluate(
         config,
         data,
@@ -687,6 +1033,8 @@ def main(argv=None) -> None:
         seeds=tuple(args.seeds),
         resume=not args.no_resume,
         forward_model=fconf.model,
+        progress=not args.no_progress,
+        model_hash=d_s.model_hash,
     )
 
 

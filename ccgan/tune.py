@@ -35,7 +35,20 @@ import optuna
 from ccgan import checkpoint
 from ccgan import data as data_lib
 from ccgan import forward as forward_lib
-from ccgan.train import TrainConfig, data_fingerprint, load_npz, make_trainer
+from ccgan.train import (
+    ConfigError,
+    TrainConfig,
+    add_config_flags,
+    add_data_flags,
+    check_fields,
+    check_forward_config,
+    check_output_dir,
+    cli_parser,
+    config_from_args,
+    data_fingerprint,
+    data_from_args,
+    make_trainer,
+)
 from mjx_arm.machine import cpu_model
 
 #: The TrainConfig fields the search sets; every other field comes from the base config.
@@ -48,16 +61,24 @@ CONTINUOUS = TUNED[:4]
 class SearchSpace:
     """Ranges of the searched hyperparameters (continuous ones are sampled log-uniformly)."""
 
-    #: Cycle-loss weight lambda_c (paper code: 10).
+    #: Range (low, high) of the cycle-loss weight lambda_c (paper code: 10).
     lambda_cycle: tuple[float, float] = (1.0, 100.0)
-    #: Feedback-loss weight lambda_f (paper code: 5).
+    #: Range of the feedback-loss weight lambda_f (paper code: 5).
     lambda_feedback: tuple[float, float] = (0.5, 50.0)
-    #: Generator learning rate (paper: 1e-4).
+    #: Range of the generator learning rate (paper: 1e-4).
     lr_generator: tuple[float, float] = (1e-5, 1e-3)
-    #: Critic learning rate (paper: 2e-4).
+    #: Range of the critic learning rate (paper: 2e-4).
     lr_critic: tuple[float, float] = (1e-5, 1e-3)
-    #: Control steps per training window to choose from.
+    #: Control steps per training window to choose from (each >= 2, as TrainConfig's).
     window_lengths: tuple[int, ...] = (5, 10, 20)
+
+    def __post_init__(self):
+        """Refuses empty or inverted ranges (ConfigError names the field)."""
+        check_fields(self, above={n: 0 for n in CONTINUOUS}, at_least={"window_lengths": 2})
+        for name in CONTINUOUS:
+            value = getattr(self, name)
+            if len(value) != 2 or value[0] > value[1]:
+                raise ConfigError(name, f"must be a range (low, high) with low <= high: {value}")
 
 
 def suggest(trial: optuna.Trial, space: SearchSpace) -> dict:
@@ -156,7 +177,8 @@ def run_study(
 
     Args:
       base: every TrainConfig field not in TUNED (epochs is the per-trial budget).
-      arrays: (pressures_s, poses_s, pressures_c, poses_c, bounds or None), as `load_npz` gives.
+      arrays: (pressures_s, poses_s, pressures_c, poses_c, bounds or None), as
+        `ccgan.data.read_translation_files` reads them.
       storage: SQLite file (created with its folder; F_c caches go beside it).
       study_name: the study's name in that file.
       n_trials: trials to run now (on top of those stored).
@@ -168,7 +190,15 @@ def run_study(
 
     Returns:
       The study.
+
+    Raises:
+      ValueError: n_trials < 1, or timeout_s given and not > 0.
     """
+    if n_trials < 1:
+        raise ValueError(f"n_trials must be >= 1, got {n_trials}")
+    if timeout_s is not None and not timeout_s > 0:
+        raise ValueError(f"timeout_s must be > 0 (or None), got {timeout_s}")
+    check_forward_config(fconf)
     storage = Path(storage)
     storage.parent.mkdir(parents=True, exist_ok=True)
     study = optuna.create_study(
@@ -322,63 +352,61 @@ def write_report(summ: dict, report_dir: str | Path, note: str = "") -> dict[str
     return paths
 
 
-def _add_config_flags(parser: argparse.ArgumentParser, cls, skip=(), prefix="") -> None:
-    for f in dataclasses.fields(cls):
-        if f.name in skip:
-            continue
-        flag = "--" + prefix + f.name.replace("_", "-")
-        dest = (prefix + f.name).replace("-", "_")
-        if f.type in ("bool", bool):
-            parser.add_argument(flag, dest=dest, action="store_true", default=f.default)
-        elif "tuple" in str(f.type):
-            typ = float if "float" in str(f.type) else int
-            parser.add_argument(flag, dest=dest, type=typ, nargs="+", default=list(f.default))
-        else:
-            typ = {"int": int, "float": float}.get(str(f.type), type(f.default))
-            parser.add_argument(flag, dest=dest, type=typ, default=f.default)
-
-
-def _config_from(args, cls, skip=(), prefix=""):
-    kw = {}
-    for f in dataclasses.fields(cls):
-        if f.name in skip:
-            continue
-        v = getattr(args, (prefix + f.name).replace("-", "_"))
-        kw[f.name] = tuple(v) if isinstance(v, list) else v
-    return cls(**kw)
+def build_parser() -> argparse.ArgumentParser:
+    """The options of `python -m ccgan.tune`."""
+    parser = cli_parser("ccgan.tune", __doc__)
+    add_data_flags(parser)
+    parser.add_argument("--storage", default="results/ccgan/tune.db", help="SQLite file")
+    parser.add_argument("--study-name", default="ccgan", help="the study's name in --storage")
+    parser.add_argument("--n-trials", type=int, default=10, help="trials to add in this run")
+    parser.add_argument("--seed", type=int, default=0, help="sampler and training seed")
+    parser.add_argument("--timeout-s", type=float, default=None, help="no new trial after this")
+    parser.add_argument(
+        "--report-dir", default="results/ccgan", help="folder for tune.md, .json, _history.png"
+    )
+    parser.add_argument(
+        "--forward-workdir", default=None, help="reuse DIR/forward_c.ckpt (a ccgan.train workdir)"
+    )
+    parser.add_argument("--note", default="", help="a paragraph put at the top of tune.md")
+    add_config_flags(parser, forward_lib.ForwardConfig, prefix="forward-")
+    add_config_flags(parser, SearchSpace, prefix="space-")
+    add_config_flags(parser, TrainConfig, skip=TUNED)
+    parser.set_defaults(epochs=5)
+    return parser
 
 
 def main(argv=None) -> None:
-    """CLI: `python -m ccgan.tune --source S.npz... --constrained C.npz... [--n-trials N ...]`."""
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--source", nargs="+", required=True, help="D_s .npz (train, then val)")
-    parser.add_argument(
-        "--constrained", nargs="+", required=True, help="D_c .npz (train, then val)"
-    )
-    parser.add_argument("--storage", default="results/ccgan/tune.db", help="SQLite file")
-    parser.add_argument("--study-name", default="ccgan")
-    parser.add_argument("--n-trials", type=int, default=10, help="trials to add in this run")
-    parser.add_argument("--seed", type=int, default=0)
-    parser.add_argument("--timeout-s", type=float, default=None, help="no new trial after this")
-    parser.add_argument("--report-dir", default="results/ccgan")
-    parser.add_argument("--forward-workdir", default=None, help="reuse DIR/forward_c.ckpt")
-    parser.add_argument("--note", default="", help="a paragraph put at the top of tune.md")
-    _add_config_flags(parser, forward_lib.ForwardConfig, prefix="forward-")
-    _add_config_flags(parser, SearchSpace, prefix="space-")
-    _add_config_flags(parser, TrainConfig, skip=TUNED)
-    parser.set_defaults(epochs=5)
-    args = parser.parse_args(argv)
-    base = _config_from(args, TrainConfig, skip=TUNED)
-    fconf = _config_from(args, forward_lib.ForwardConfig, prefix="forward-")
-    space = _config_from(args, SearchSpace, prefix="space-")
+    """CLI: `python -m ccgan.tune --source S.npz... --constrained C.npz... [--n-trials N ...]`.
 
-    ps, xs, bounds = load_npz(*args.source)
-    pc, xc, _ = load_npz(*args.constrained)
+    Every option and data file is checked before any trial runs (usage errors, status 2).
+    """
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    base = config_from_args(parser, args, TrainConfig, skip=TUNED)
+    fconf = config_from_args(
+        parser, args, forward_lib.ForwardConfig, prefix="forward-", check=check_forward_config
+    )
+    space = config_from_args(parser, args, SearchSpace, prefix="space-")
+    if args.n_trials < 1:
+        parser.error(f"--n-trials must be >= 1, got {args.n_trials}")
+    if args.timeout_s is not None and not args.timeout_s > 0:
+        parser.error(f"--timeout-s must be > 0, got {args.timeout_s}")
+    check_output_dir(parser, "--report-dir", args.report_dir)
+    check_output_dir(parser, "--storage's folder", Path(args.storage).parent)
+    if Path(args.storage).is_dir():
+        parser.error(f"--storage {args.storage} is a folder, not an SQLite file")
+    if args.forward_workdir is not None:
+        fc = Path(args.forward_workdir) / "forward_c.ckpt"
+        if not fc.is_file():
+            parser.error(f"--forward-workdir {args.forward_workdir}: no {fc}")
+    d_s, d_c = data_from_args(parser, args)
+    bounds = data_lib.union_bounds(d_s.bounds, d_c.bounds)
+
     start = time.perf_counter()
     n_before = _n_stored(args.storage, args.study_name)
     study = run_study(
         base,
-        (ps, xs, pc, xc, bounds),
+        (d_s.pressures_bar, d_s.poses, d_c.pressures_bar, d_c.poses, bounds),
         args.storage,
         args.study_name,
         args.n_trials,

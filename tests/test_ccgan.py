@@ -362,9 +362,9 @@ def test_end_to_end_and_resume_equals_uninterrupted(tiny_setup, tmp_path):
     assert _params_equal(resumed.opt_gen, full.opt_gen)
     assert [r["epoch"] for r in rows2] == [r["epoch"] for r in rows]
 
-    # A run with another config refuses the checkpoint.
+    # A run with another config refuses the checkpoint, naming the changed field.
     other = dataclasses.replace(TINY, lambda_cycle=3.0)
-    with pytest.raises(checkpoint.CheckpointError, match="does not match"):
+    with pytest.raises(checkpoint.CheckpointError, match="lambda_cycle: stored 10.0, this run 3.0"):
         train_lib.train_and_evaluate(other, data, fparams, tmp_path / "cut", **kw)
 
 

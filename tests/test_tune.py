@@ -5,10 +5,12 @@ import math
 
 import numpy as np
 import optuna
+import pytest
 
 import mjx_arm  # noqa: F401  (sets the XLA CPU flag before JAX creates its backend)
 from ccgan import data as data_lib
 from ccgan import tune
+from mjx_arm.dataset import Dataset, save_dataset
 
 TINY_FLAGS = [
     "--epochs", "2", "--batch-size", "4", "--n-val", "1", "--stretch-choices", "1", "2",
@@ -19,8 +21,9 @@ TINY_FLAGS = [
 ]  # fmt: skip
 
 
-def _write_domain(path, rng, n, gain):
-    """Synthetic babbling: held random pressures, poses a first-order lag of them (6 dims)."""
+def _write_domain(path, rng, n, gain, domain):
+    """Synthetic babbling: held random pressures, poses a first-order lag of them (6 dims),
+    written as an `mjx_arm.dataset` file of `domain` (both domains: one made-up arm)."""
     pressures = data_lib.random_held_programs(rng, n, 20)
     poses = np.zeros((n, 20, 6))
     pose = np.zeros((n, 6))
@@ -28,13 +31,15 @@ def _write_domain(path, rng, n, gain):
         target = gain * np.concatenate([pressures[:, t], -pressures[:, t]], -1) / 3.5
         pose = pose + 0.5 * (target - pose)
         poses[:, t] = pose
-    np.savez(path, pressures_bar=pressures, poses=poses)
+    low, high = np.full(6, -gain), np.full(6, gain)
+    arrays = [np.asarray(a, np.float32) for a in (pressures, poses, low, high)]
+    save_dataset(path, Dataset(*arrays, domain, {}, "tinyarm", seed=0, split="train"))
 
 
 def test_tiny_study_writes_report_and_resumes(tmp_path):
     rng = np.random.default_rng(0)
-    _write_domain(tmp_path / "s.npz", rng, 5, 0.10)
-    _write_domain(tmp_path / "c.npz", rng, 4, 0.07)  # unpaired: other count and gain
+    _write_domain(tmp_path / "s.npz", rng, 5, 0.10, "source")
+    _write_domain(tmp_path / "c.npz", rng, 4, 0.07, "constrained")  # unpaired: other count, gain
     db = tmp_path / "study" / "tune.db"
     argv = [
         "--source", str(tmp_path / "s.npz"), "--constrained", str(tmp_path / "c.npz"),
@@ -64,3 +69,33 @@ def test_tiny_study_writes_report_and_resumes(tmp_path):
     # The resumed sampler does not replay the first trial's start-up point.
     assert study.trials[2].params != study.trials[0].params
     assert len(json.loads((tmp_path / "report" / "tune.json").read_text())["trials"]) == 3
+
+
+@pytest.mark.parametrize(
+    "flags, named",
+    [
+        (["--n-trials", "0"], "--n-trials"),
+        (["--timeout-s", "0"], "--timeout-s"),
+        (["--report-dir", "FILE"], "--report-dir"),
+        (["--space-window-lengths", "1", "5"], "--space-window-lengths"),
+        (["--space-lr-critic", "1e-3", "1e-5"], "--space-lr-critic"),
+        (["--forward-batch-size", "0"], "--forward-batch-size"),
+        (["--batch-size", "0"], "--batch-size"),
+    ],
+)
+def test_bad_options_stop_before_any_trial(tmp_path, flags, named, capsys):
+    rng = np.random.default_rng(0)
+    _write_domain(tmp_path / "s.npz", rng, 5, 0.10, "source")
+    _write_domain(tmp_path / "c.npz", rng, 4, 0.07, "constrained")
+    (tmp_path / "FILE").write_text("")
+    db = tmp_path / "study" / "tune.db"
+    argv = [
+        "--source", str(tmp_path / "s.npz"), "--constrained", str(tmp_path / "c.npz"),
+        "--storage", str(db), "--report-dir", str(tmp_path / "report"), *TINY_FLAGS,
+        "--n-trials", "1",
+    ]  # fmt: skip
+    flags = [str(tmp_path / f) if f == "FILE" else f for f in flags]
+    with pytest.raises(SystemExit) as exc:
+        tune.main([*argv, *flags])
+    assert exc.value.code == 2 and named in capsys.readouterr().err
+    assert not db.parent.exists() and not (tmp_path / "report").exists()
