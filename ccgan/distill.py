@@ -24,10 +24,14 @@ validation ("complete": false until the run ends), so a killed run keeps its bes
 
     python -m ccgan.distill --translators results/ccgan_sim5/translator_seed{0,1,2}.ckpt \\
         --seeds 0 1 2 --out results/ccgan_sim6
+
+As `ccgan.finetune`, the CLI simulates the arm of `--model` (default the solid-disc arm,
+`mjx_arm.constants.SOLID_MODEL_PATH`, the one the committed translators were trained on).
 """
 
 from __future__ import annotations
 
+import argparse
 import dataclasses
 import json
 import time
@@ -38,6 +42,7 @@ import numpy as np
 import mjx_arm  # noqa: F401  (before jax: sets the XLA CPU flag)
 from ccgan.data import PRESSURE_DIM, normalise_pressure, samples
 from ccgan.finetune import common_k, generator_commands, keep_better, stage_parser, start_stage
+from ccgan.train import ConfigError, add_config_flags, check_fields, config_from_args
 from ccgan.translator import Translator
 
 
@@ -78,6 +83,39 @@ class DistillConfig:
     """Seed of the programs and of the batch order."""
     max_wall_s: float = 0.0
     """Stop training after this many seconds (0: no limit); the best iterate so far is kept."""
+
+    def __post_init__(self):
+        """Refuses settings that would fail late, after the teacher's commands are computed and
+        cached (ConfigError names the field)."""
+        period = 1.0 / mjx_arm.CONTROL_HZ
+        check_fields(
+            self,
+            at_least={
+                "n_train": 0,
+                "n_val": 0,
+                "n_train_full": 0,
+                "n_val_full": 0,
+                "duration_s": period,
+                "window_s": period,
+                "horizon_steps": 1,
+                "iterations": 1,
+                "epochs": 1,
+                "batch_size": 1,
+                "eval_every": 1,
+                "seed": 0,
+                "max_wall_s": 0,
+            },
+            above={"head_weight": 0, "learning_rate": 0},
+        )
+        n_train = self.n_train + self.n_train_full
+        if self.batch_size > n_train:
+            raise ConfigError(
+                "batch_size",
+                f"must be <= n_train + n_train_full = {n_train} training programs,"
+                f" got {self.batch_size}",
+            )
+        if self.n_val + self.n_val_full < 1:
+            raise ConfigError("n_val", "plus n_val_full must be >= 1 (held-out programs)")
 
     def teacher_key(self) -> dict:
         """The settings the cached teacher commands depend on (not the program counts)."""
@@ -199,9 +237,7 @@ def distill(
     from eval.pipeline import run_dc, stretch
 
     k = common_k(translators)
-    n_train = config.n_train + config.n_train_full
-    if config.batch_size > n_train or config.n_val + config.n_val_full == 0:
-        raise ValueError(f"need batch_size <= {n_train} training programs and some held-out ones")
+    n_train = config.n_train + config.n_train_full  # >= batch_size (DistillConfig checks)
     tr = translators[0]
     t0 = time.perf_counter()
     data = teacher_data(config, arm_s, arm_c, k, cache, log, progress)
@@ -316,15 +352,18 @@ def distill(
     return best_so_far(), history
 
 
+def build_parser() -> argparse.ArgumentParser:
+    """The options of `python -m ccgan.distill`."""
+    p = stage_parser("ccgan.distill", __doc__)
+    add_config_flags(p, DistillConfig)
+    return p
+
+
 def main(argv=None) -> None:
     """CLI: `python -m ccgan.distill --translators A.ckpt [B.ckpt ...] --out DIR`."""
-    p = stage_parser(__doc__.splitlines()[0])
-    for f in dataclasses.fields(DistillConfig):
-        p.add_argument("--" + f.name.replace("_", "-"), type=type(f.default), default=f.default)
+    p = build_parser()
     a = p.parse_args(argv)
-    config = DistillConfig(
-        **{f.name: getattr(a, f.name) for f in dataclasses.fields(DistillConfig)}
-    )
+    config = config_from_args(p, a, DistillConfig)
     stage = start_stage(p, a, "ccgan.distill", dataclasses.asdict(config), argv)
     stage.run["method"] = "distill"
 

@@ -40,6 +40,10 @@ and `python -m eval.shapes --ccgan-path`.
     python -m ccgan.finetune --translators results/ccgan/translator_seed{0,1,2}.ckpt \\
         --seeds 0 1 2 --out results/ccgan_sim
 
+The CLI simulates the arm of `--model` (default `mjx_arm.constants.SOLID_MODEL_PATH`, the
+solid-disc arm every committed translator was trained on; `models/softarm.xml` is another arm)
+in D_s and in `--domain`, and refuses translators whose file records another arm's model hash.
+
 Gradients through thousands of MJX physics steps are slow on a CPU: use a GPU for real runs.
 """
 
@@ -57,7 +61,16 @@ import numpy as np
 import mjx_arm  # noqa: F401  (before jax: sets the XLA CPU flag)
 from ccgan import checkpoint, losses
 from ccgan.data import PRESSURE_DIM, denormalise_pressure, samples
+from ccgan.train import (
+    ConfigError,
+    add_config_flags,
+    check_fields,
+    check_output_dir,
+    cli_parser,
+    config_from_args,
+)
 from ccgan.translator import Translator, translator_from_checkpoint
+from mjx_arm import constants
 
 #: Program families a fine-tune can draw from (`FinetuneConfig.programs`).
 PROGRAM_FAMILIES = ("babble", "shape_like")
@@ -103,8 +116,46 @@ class FinetuneConfig:
     """Stop after this many seconds (0: no limit); the best iterate so far is kept."""
 
     def __post_init__(self):
+        """Refuses settings that would fail late or compute nothing (ConfigError names the field).
+
+        The anchor term compares G_c after the window, so anchor programs must be at least one
+        control period longer than `window_s` (else the term is a mean over nothing: NaN).
+        """
         if self.programs not in PROGRAM_FAMILIES:
-            raise ValueError(f"programs must be one of {PROGRAM_FAMILIES}, got {self.programs!r}")
+            raise ConfigError(
+                "programs", f"must be one of {PROGRAM_FAMILIES}, got {self.programs!r}"
+            )
+        period = 1.0 / constants.CONTROL_HZ
+        check_fields(
+            self,
+            at_least={
+                "steps": 1,
+                "batch_size": 1,
+                "window_s": period,
+                "n_train": 1,
+                "n_val": 1,
+                "val_long_s": 0,
+                "n_anchor": 1,
+                "anchor_weights": 0,
+                "orientation_weight_cm_per_rad": 0,
+                "eval_every": 1,
+                "seed": 0,
+                "max_wall_s": 0,
+            },
+            above={"learning_rates": 0},
+        )
+        if self.batch_size > self.n_train:
+            raise ConfigError(
+                "batch_size", f"must be <= n_train = {self.n_train}, got {self.batch_size}"
+            )
+        if not self.anchor_s >= self.window_s + period:
+            raise ConfigError(
+                "anchor_s",
+                f"must exceed window_s = {self.window_s} by a control period ({period} s),"
+                f" got {self.anchor_s}",
+            )
+        if 0 < self.val_long_s < period:
+            raise ConfigError("val_long_s", f"must be 0 or >= {period} s, got {self.val_long_s}")
 
     def to_dict(self) -> dict:
         return dataclasses.asdict(self)
@@ -391,14 +442,25 @@ def save_finetuned(path, source_path, g_c_params, finetune_meta: dict) -> Path:
     return checkpoint.save(path, tree, meta)
 
 
-def stage_parser(description: str) -> argparse.ArgumentParser:
+def stage_parser(module: str, doc: str) -> argparse.ArgumentParser:
     """A parser with the flags of every fine-tune stage's CLI (this module's and `ccgan.distill`'s):
-    --translators, --seeds, --out, --domain."""
-    p = argparse.ArgumentParser(description=description)
+    --translators, --seeds, --out, --model, --domain; `start_stage` checks and loads them."""
+    p = cli_parser(module, doc)
     p.add_argument("--translators", nargs="+", required=True, help="translator checkpoints")
     p.add_argument("--seeds", type=int, nargs="+", help="seed of each file (default 0, 1, ...)")
     p.add_argument("--out", required=True, help="output folder")
-    p.add_argument("--domain", default="constrained", help="D_c domain name (mjx_arm.DOMAINS)")
+    p.add_argument(
+        "--model",
+        default=str(constants.SOLID_MODEL_PATH),
+        help="MJCF of the arm to simulate: the one the translators were trained on (the"
+        " committed translators: the solid-disc arm)",
+    )
+    p.add_argument(
+        "--domain",
+        default="constrained",
+        choices=sorted(d for d in mjx_arm.DOMAINS if d != "source"),
+        help="D_c domain (mjx_arm.DOMAINS)",
+    )
     return p
 
 
@@ -429,8 +491,16 @@ class Stage:
         tmp.replace(self.out / json_name)
 
 
+def trained_model_hash(meta: dict) -> str | None:
+    """The `Arm.model_hash` a translator file says it was trained or last refined on, or None
+    (files written before the hash was recorded)."""
+    return meta.get("finetune", {}).get("model_hash") or meta.get("model_hash")
+
+
 def start_stage(p: argparse.ArgumentParser, a, module: str, config: dict, argv) -> Stage:
-    """Loads what `stage_parser`'s flags name; `module` and `config` go into the run record."""
+    """Checks and loads what `stage_parser`'s flags name; `module` and `config` go into the run
+    record. Every problem (seeds, output folder, an unreadable translator or MJCF, translators
+    recorded on another arm) is a usage error (status 2) before any simulation starts."""
     import jax
 
     from mjx_arm.machine import cpu_model, enable_compilation_cache
@@ -438,12 +508,29 @@ def start_stage(p: argparse.ArgumentParser, a, module: str, config: dict, argv) 
     seeds = a.seeds if a.seeds is not None else list(range(len(a.translators)))
     if len(seeds) != len(a.translators):
         p.error("give one seed per translator file")
+    if len(set(seeds)) != len(seeds):
+        p.error(f"--seeds must be distinct, got {seeds}")
+    check_output_dir(p, "--out", a.out)
+    try:
+        sources = [checkpoint.load(path) for path in a.translators]  # read once, rewritten often
+        translators = [
+            translator_from_checkpoint(src, path)
+            for src, path in zip(sources, a.translators, strict=True)
+        ]
+    except checkpoint.CheckpointError as err:
+        p.error(f"--translators: {err}")
+    try:
+        arm_s, arm_c = (mjx_arm.load(a.model, domain=d) for d in ("source", a.domain))
+    except (FileNotFoundError, ValueError) as err:  # ModelValidationError is a ValueError
+        p.error(f"--model {a.model}: {err}")
+    for path, (_, meta) in zip(a.translators, sources, strict=True):
+        trained = trained_model_hash(meta)
+        if trained is not None and trained != arm_c.model_hash:
+            p.error(
+                f"{path} was trained on the arm with model hash {trained}, but --model"
+                f" {a.model} has {arm_c.model_hash}"
+            )
     enable_compilation_cache()
-    sources = [checkpoint.load(path) for path in a.translators]  # read once, rewritten often
-    translators = [
-        translator_from_checkpoint(src, path)
-        for src, path in zip(sources, a.translators, strict=True)
-    ]
     out = Path(a.out)
     out.mkdir(parents=True, exist_ok=True)
     dev = jax.devices()[0]
@@ -451,31 +538,27 @@ def start_stage(p: argparse.ArgumentParser, a, module: str, config: dict, argv) 
         "command": f"python -m {module} " + " ".join(argv if argv is not None else sys.argv[1:]),
         "machine": f"{cpu_model()}; JAX device: {dev.platform} ({dev.device_kind})",
         "config": config,
+        "model": str(a.model),
+        "model_hash": arm_c.model_hash,
         "domain": a.domain,
         "sources": [str(x) for x in a.translators],
         "seeds": seeds,
     }
-    arm_s, arm_c = mjx_arm.load(domain="source"), mjx_arm.load(domain=a.domain)
     return Stage(seeds, sources, translators, arm_s, arm_c, out, run)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The options of `python -m ccgan.finetune`."""
+    p = stage_parser("ccgan.finetune", __doc__)
+    add_config_flags(p, FinetuneConfig, choices={"programs": PROGRAM_FAMILIES})
+    return p
 
 
 def main(argv=None) -> None:
     """CLI: `python -m ccgan.finetune --translators A.ckpt [B.ckpt ...] --out DIR`."""
-    p = stage_parser(__doc__.splitlines()[0])
-    for f in dataclasses.fields(FinetuneConfig):
-        flag = "--" + f.name.replace("_", "-")
-        if isinstance(f.default, tuple):
-            p.add_argument(flag, type=float, nargs="+", default=list(f.default))
-        else:
-            choices = PROGRAM_FAMILIES if f.name == "programs" else None
-            p.add_argument(flag, type=type(f.default), default=f.default, choices=choices)
+    p = build_parser()
     a = p.parse_args(argv)
-    config = FinetuneConfig(
-        **{
-            f.name: tuple(v) if isinstance(v := getattr(a, f.name), list) else v
-            for f in dataclasses.fields(FinetuneConfig)
-        }
-    )
+    config = config_from_args(p, a, FinetuneConfig)
     stage = start_stage(p, a, "ccgan.finetune", config.to_dict(), argv)
 
     def write(params, history) -> None:

@@ -11,6 +11,7 @@ from ccgan import checkpoint, distill, load_translator
 from ccgan.finetune import x_err_cm_c
 from ccgan.translator import translator_path
 from eval import shapes
+from mjx_arm import constants
 
 TINY = distill.DistillConfig(
     n_train=4, n_val=2, duration_s=1.0, epochs=4, batch_size=2, eval_every=2, learning_rate=3e-3
@@ -118,6 +119,10 @@ def test_distill_cli_writes_translators_with_their_history(tmp_path):
     _, meta = checkpoint.load(out / "translator.ckpt")
     assert meta["finetune"]["method"] == "distill" and meta["finetune"]["seed"] == 0
     assert meta["finetune"]["complete"]
+    # By default the stage simulates the solid-disc arm the shipped translators were trained on.
+    solid = mjx_arm.load(constants.SOLID_MODEL_PATH)
+    assert meta["finetune"]["model"] == str(constants.SOLID_MODEL_PATH)
+    assert meta["finetune"]["model_hash"] == solid.model_hash
     assert (out / "teacher.npz").exists() and (out / "distill.json").exists()
     shipped = load_translator(source)
     assert tuned.k == shipped.k
