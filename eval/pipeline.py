@@ -12,8 +12,9 @@ Methods:
   stretch  D_s pressures, each held k periods; k minimises the tracking error on a separate
            validation program (`shapes.validation_program`), searched over
            EvalConfig.stretch_candidates = {1, 5, 10, ..., 30}: the GAN's set {5, ..., 30} plus 1.
-  ccgan    the trained CCGAN-GP translator `ccgan.load_translator(path)` (skipped with a note
-           when none is available).
+  ccgan    the trained CCGAN-GP translator `ccgan.load_translator(path)`. Every translator
+           method is skipped with a note when its default checkpoint is absent; one that was
+           asked for (--ccgan-path etc.) must load, or the run stops before any work.
   ccgan_sim  the CCGAN-GP translator fine-tuned in the simulator: through the MJX rollout
            (`ccgan.finetune`: results/ccgan_sim, ccgan_sim2, ccgan_sim3 on babbling programs,
            ccgan_sim4, ccgan_sim5 on shape-like ones), then by imitation of `eval.mpc`
@@ -45,6 +46,7 @@ import argparse
 import dataclasses
 import inspect
 import json
+import math
 import os
 import sys
 import threading
@@ -52,9 +54,11 @@ import time
 from pathlib import Path
 
 import numpy as np
+from tqdm import tqdm
 
-import mjx_arm  # noqa: F401  (before jax: sets the XLA CPU flag)
+import mjx_arm  # (before jax: sets the XLA CPU flag)
 from eval import metrics, mpc, shapes
+from mjx_arm import constants
 
 METHODS = ("none", "stretch", "ccgan", "ccgan_sim", "wcgan", "mpc", "oracle")
 #: What runs without --methods (the oracle is left out on CPU).
@@ -68,6 +72,67 @@ CCGAN_SIM_DEFAULT_PATH = (
 WCGAN_DEFAULT_PATH = (
     Path(__file__).resolve().parent.parent / "results" / "wcgan" / "translator.ckpt"
 )
+#: The main job's output folder, relative to the working directory (the README runs it from the
+#: repository root): the committed results, which the main job regenerates.
+RESULTS_DIR = "results"
+#: Parent of the run folders that runs with other settings write when no output folder is given:
+#: RUNS_DIR/quick-<time> for --quick, RUNS_DIR/custom-<time> otherwise, never results/.
+RUNS_DIR = "runs"
+#: What the report says of the arm at constants.SOLID_MODEL_PATH.
+SOLID_ARM_NOTE = (
+    "the old solid-disc arm, on which the committed translators (results/ccgan, results/wcgan,"
+    " results/ccgan_sim8) were trained"
+)
+
+
+class ConfigError(ValueError):
+    """A setting of EvalConfig or OracleConfig that no run can use; `field` names it (the CLI
+    turns it into a usage error naming the flag)."""
+
+    def __init__(self, field: str, reason: str):
+        super().__init__(f"{field}: {reason}")
+        self.field = field
+        self.reason = reason
+
+
+class TranslatorError(ValueError):
+    """A translator checkpoint that was asked for (a path, or $CCGAN_TRANSLATOR) is missing or
+    does not load; the run stops before any work instead of skipping the method."""
+
+
+def _require(ok: bool, field: str, reason: str) -> None:
+    if not ok:
+        raise ConfigError(field, reason)
+
+
+def _is_int(value) -> bool:
+    return isinstance(value, int | np.integer) and not isinstance(value, bool)
+
+
+def _check_duration(field: str, value) -> None:
+    """A program length (s) that gives at least one 0.1 s command (`shapes.times_s`)."""
+    _require(
+        isinstance(value, int | float)
+        and math.isfinite(value)
+        and round(value * shapes.CONTROL_HZ) >= 1,
+        field,
+        f"must be a length in seconds of at least one {1 / shapes.CONTROL_HZ:g} s command,"
+        f" got {value!r}",
+    )
+
+
+def _check_names(field: str, values, known) -> None:
+    """A non-empty tuple of distinct names, each one of `known`."""
+    _require(len(values) > 0, field, "needs at least one")
+    unknown = [v for v in values if v not in known]
+    _require(not unknown, field, f"unknown {unknown}; known: {list(known)}")
+    _require(len(set(values)) == len(values), field, f"repeats a name: {list(values)}")
+
+
+def _check_file(field: str, path) -> None:
+    """An explicitly given input file (a translator checkpoint, an MJCF) that exists."""
+    if path is not None:
+        _require(Path(path).is_file(), field, f"no such file: {path}")
 
 
 @dataclasses.dataclass(frozen=True)
@@ -91,26 +156,49 @@ class OracleConfig:
     "stretch" (the stretch program)."""
 
     def __post_init__(self):
-        if self.init not in ("mpc", "stretch"):
-            raise ValueError(f"oracle init must be 'mpc' or 'stretch', got {self.init!r}")
+        """Refuses settings that would fail (or mean nothing) after minutes of work."""
+        _require(
+            self.init in ("mpc", "stretch"),
+            "oracle.init",
+            f"oracle init must be 'mpc' or 'stretch', got {self.init!r}",
+        )
+        _require(
+            _is_int(self.steps) and self.steps >= 1,
+            "oracle.steps",
+            f"needs at least one Adam step, got {self.steps!r}",
+        )
+        _require(
+            math.isfinite(self.learning_rate) and self.learning_rate > 0,
+            "oracle.learning_rate",
+            f"must be finite and > 0, got {self.learning_rate!r}",
+        )
+        if self.horizon_s is not None:
+            _check_duration("oracle.horizon_s", self.horizon_s)
+        w = self.orientation_weight_cm_per_rad
+        _require(
+            math.isfinite(w) and w >= 0,
+            "oracle.orientation_weight_cm_per_rad",
+            f"must be finite and >= 0, got {w!r}",
+        )
 
 
 @dataclasses.dataclass(frozen=True)
 class EvalConfig:
-    """What to evaluate and where to write it."""
+    """What to evaluate and where to write it. Every field is checked when the config is made
+    (`ConfigError`), so no run fails on a setting after minutes of simulation."""
 
     shapes: tuple[str, ...] = tuple(shapes.SHAPES)
     """Shape names (keys of `shapes.SHAPES`)."""
     methods: tuple[str, ...] = METHODS
-    """Methods to run; unavailable translators are skipped with a note."""
+    """Methods to run; a translator whose default checkpoint is absent is skipped with a note."""
     seeds: tuple[int, ...] = (0, 1, 2)
-    """Seeds: noise draws, and translator draws where a translator is stochastic."""
+    """Seeds (>= 0): noise draws, and translator draws where a translator is stochastic."""
     duration_s: float = 60.0
     """Length of each shape program (s)."""
     backend: str = "c"
     """Simulator backend for every rollout except the oracle's optimisation: "c" or "mjx"."""
     stretch_candidates: tuple[int, ...] = (1, 5, 10, 15, 20, 25, 30)
-    """Stretch factors k tried for the stretch baseline."""
+    """Stretch factors k (control periods per source step, >= 1) tried for the stretch baseline."""
     validation_duration_s: float = 20.0
     """Length of the validation program that picks k (s)."""
     noise_stds: tuple[float, ...] = (0.1, 0.3, 0.5)
@@ -121,16 +209,22 @@ class EvalConfig:
     """Run the noise and periodicity tests."""
     render: bool = False
     """Write MP4 videos."""
-    out_dir: str = "results"
-    """Output folder."""
+    out_dir: str | None = None
+    """Output folder. None: RESULTS_DIR for the main job's settings (`is_main_job`; it
+    regenerates the committed results), else a new run folder under RUNS_DIR (`output_dir`)."""
+    quick: bool = False
+    """A smoke run (`quick`): marked on every plot and video and in shapes.md."""
     xml: str | None = None
-    """MJCF text of the arm (None: the committed model); tests pass a 3-segment arm."""
+    """MJCF text of the arm (None: the file model_path); tests pass a 3-segment arm."""
+    model_path: str = str(constants.SOLID_MODEL_PATH)
+    """MJCF file of the arm when xml is None. Default: the old solid-disc arm
+    (`constants.SOLID_MODEL_PATH`), the one the committed translators were trained on."""
     target_domain: str = "constrained"
     """The domain translated into (D_c): "constrained", or "aged" for the second pair."""
     ccgan_path: str | None = None
     """Checkpoint for ccgan.load_translator (None: the translator's default)."""
     wcgan_path: str | None = None
-    """Checkpoint of the WCGAN-GP baseline."""
+    """Checkpoint of the WCGAN-GP baseline (None: WCGAN_DEFAULT_PATH)."""
     ccgan_sim_path: str | None = None
     """Checkpoint of the simulator-fine-tuned CCGAN-GP (None: CCGAN_SIM_DEFAULT_PATH)."""
     oracle: OracleConfig = OracleConfig()
@@ -143,6 +237,190 @@ class EvalConfig:
     """Height, width (pixels) of each of the three video panels."""
     plots: bool = True
     """Write PNG figures."""
+
+    def __post_init__(self):
+        """Refuses settings that would fail (or mean nothing) after minutes of work."""
+        from mjx_arm import domains
+
+        _check_names("shapes", self.shapes, shapes.SHAPES)
+        _check_names("methods", self.methods, METHODS)
+        _require(len(self.seeds) > 0, "seeds", "needs at least one seed")
+        _require(
+            all(_is_int(s) and s >= 0 for s in self.seeds)
+            and len(set(self.seeds)) == len(self.seeds),
+            "seeds",
+            f"must be distinct integers >= 0, got {list(self.seeds)}",
+        )
+        _check_duration("duration_s", self.duration_s)
+        _check_duration("validation_duration_s", self.validation_duration_s)
+        _require(self.backend in ("c", "mjx"), "backend", f"'c' or 'mjx', got {self.backend!r}")
+        k = self.stretch_candidates
+        _require(
+            len(k) > 0 and all(_is_int(v) and v >= 1 for v in k) and len(set(k)) == len(k),
+            "stretch_candidates",
+            f"needs distinct integers k >= 1 (control periods per source step), got {list(k)}",
+        )
+        _require(
+            all(math.isfinite(s) and s >= 0 for s in self.noise_stds),
+            "noise_stds",
+            f"must be finite and >= 0, got {list(self.noise_stds)}",
+        )
+        _require(
+            _is_int(self.n_repeats) and self.n_repeats >= 1,
+            "n_repeats",
+            f"needs at least one repetition, got {self.n_repeats!r}",
+        )
+        _require(
+            self.out_dir is None or not Path(self.out_dir).is_file(),
+            "out_dir",
+            f"{self.out_dir} is a file, not a folder",
+        )
+        if self.xml is None:
+            _check_file("model_path", self.model_path)
+        targets = [d for d in domains.DOMAINS if d != "source"]
+        _require(
+            self.target_domain in targets,
+            "target_domain",
+            f"one of {targets}, got {self.target_domain!r}",
+        )
+        for field in ("ccgan_path", "wcgan_path", "ccgan_sim_path"):
+            _check_file(field, getattr(self, field))
+        _require(isinstance(self.oracle, OracleConfig), "oracle", "must be an OracleConfig")
+        _require(
+            _is_int(self.video_fps) and self.video_fps >= 1,
+            "video_fps",
+            f"must be an integer >= 1, got {self.video_fps!r}",
+        )
+        _require(
+            math.isfinite(self.video_speedup) and self.video_speedup > 0,
+            "video_speedup",
+            f"must be finite and > 0, got {self.video_speedup!r}",
+        )
+        _require(
+            len(self.video_panel_hw) == 2
+            and all(_is_int(v) and v >= 1 for v in self.video_panel_hw),
+            "video_panel_hw",
+            f"needs (height, width) pixels >= 1, got {self.video_panel_hw!r}",
+        )
+
+
+def quick(cfg: EvalConfig) -> EvalConfig:
+    """The smoke-run version of cfg (--quick): programs of at most 10 s, the first seed, a 10 s
+    validation program, two repetitions, marked as quick. Not the main job: with no out_dir it
+    writes a new RUNS_DIR/quick-<time> folder."""
+    return dataclasses.replace(
+        cfg,
+        duration_s=min(cfg.duration_s, 10.0),
+        seeds=cfg.seeds[:1],
+        validation_duration_s=min(cfg.validation_duration_s, 10.0),
+        n_repeats=min(cfg.n_repeats, 2),
+        quick=True,
+    )
+
+
+def default_methods() -> tuple[str, ...]:
+    """The methods run without --methods: DEFAULT_METHODS, less the oracle on a CPU.
+
+    Measured on a 2-core CPU: 500 s for 10 Adam steps of five 2 s programs at k = 10
+    (results/full at commit 7e006b8), which would take the main job past 15 min.
+    """
+    import jax
+
+    if jax.default_backend() == "cpu":
+        return tuple(m for m in DEFAULT_METHODS if m != "oracle")
+    return DEFAULT_METHODS
+
+
+def main_job_config() -> EvalConfig:
+    """The main job's settings (`python -m eval.shapes --render`), whose outputs are committed in
+    results/: every default, with this machine's default methods."""
+    return EvalConfig(methods=default_methods(), render=True, out_dir=RESULTS_DIR)
+
+
+def translator_source(method: str, cfg: EvalConfig) -> tuple[Path, bool]:
+    """(checkpoint file, whether it was asked for) of a translator method.
+
+    Asked for: a path in cfg, or for ccgan also $CCGAN_TRANSLATOR (`ccgan.translator_path`);
+    otherwise the method's default file, which may be absent.
+    """
+    if method == "ccgan":
+        from ccgan.translator import translator_path
+
+        asked = cfg.ccgan_path is not None or os.environ.get("CCGAN_TRANSLATOR") is not None
+        return translator_path(cfg.ccgan_path), asked
+    given, default = {
+        "ccgan_sim": (cfg.ccgan_sim_path, CCGAN_SIM_DEFAULT_PATH),
+        "wcgan": (cfg.wcgan_path, WCGAN_DEFAULT_PATH),
+    }[method]
+    return Path(given or default), given is not None
+
+
+def is_main_job(cfg: EvalConfig) -> bool:
+    """Whether cfg computes what the main job computes: every setting but out_dir and render
+    (videos only add files) equal to `main_job_config`'s, the same arm file, and no translator
+    checkpoint asked for. Only such a run may write results/ without being told to."""
+    main = main_job_config()
+    same_model = Path(cfg.model_path).resolve() == Path(main.model_path).resolve()
+    fixed = {"out_dir": None, "render": False, "model_path": main.model_path}
+    return (
+        dataclasses.replace(cfg, **fixed) == dataclasses.replace(main, **fixed)
+        and same_model
+        and not any(translator_source(m, cfg)[1] for m in TRANSLATOR_METHODS)
+    )
+
+
+def output_dir(cfg: EvalConfig) -> Path:
+    """The folder a run writes, created: cfg.out_dir when given; RESULTS_DIR for the main job;
+    else a new folder RUNS_DIR/<quick|custom>-<YYYYmmdd-HHMMSS>[-n], never one that exists, so
+    a smoke run never replaces the committed results or another run's files."""
+    if cfg.out_dir is not None:
+        out = Path(cfg.out_dir)
+        out.mkdir(parents=True, exist_ok=True)
+        return out
+    if is_main_job(cfg):
+        out = Path(RESULTS_DIR)
+        out.mkdir(parents=True, exist_ok=True)
+        return out
+    stem = f"{'quick' if cfg.quick else 'custom'}-{time.strftime('%Y%m%d-%H%M%S')}"
+    Path(RUNS_DIR).mkdir(parents=True, exist_ok=True)
+    for n in range(1000):
+        out = Path(RUNS_DIR) / (stem if n == 0 else f"{stem}-{n}")
+        try:
+            out.mkdir()
+            return out
+        except FileExistsError:
+            continue
+    raise FileExistsError(f"no free run folder {stem}-<n> under {RUNS_DIR}")
+
+
+def run_mark(config: dict) -> str | None:
+    """The words marking a quick run's plots, videos and report (None for other runs).
+
+    Args:
+      config: `dataclasses.asdict` of the EvalConfig (shapes.json's "config"); older files
+        have no "quick" and are not marked.
+    """
+    if not config.get("quick"):
+        return None
+    return (
+        f"QUICK RUN: {config['duration_s']:g} s programs, seeds {list(config['seeds'])}"
+        " - not the main job's results"
+    )
+
+
+def model_description(cfg: EvalConfig) -> dict:
+    """{"file": the arm's MJCF (relative to the repository when inside it), "note": what it is}
+    for shapes.json and shapes.md."""
+    if cfg.xml is not None:
+        return {"file": "MJCF text (EvalConfig.xml)", "note": "a custom arm"}
+    path = Path(cfg.model_path).resolve()
+    try:
+        name = str(path.relative_to(constants.ROOT))
+    except ValueError:
+        name = str(path)
+    solid = path == constants.SOLID_MODEL_PATH.resolve()
+    other = "not the arm the committed translators were trained on (models/softarm_solid.xml)"
+    return {"file": name, "note": SOLID_ARM_NOTE if solid else other}
 
 
 # --------------------------------------------------------------------------------- environment
@@ -160,13 +438,17 @@ def machine_description() -> str:
 
 
 def load_arms(cfg: EvalConfig):
-    """(D_s arm, D_c arm in cfg.target_domain) from cfg.xml or the committed model."""
+    """(D_s arm, D_c arm in cfg.target_domain) from cfg.xml, else the file cfg.model_path (by
+    default the solid-disc arm the committed translators were trained on)."""
     if cfg.xml is not None:
         return (
             mjx_arm.load(xml=cfg.xml, domain="source"),
             mjx_arm.load(xml=cfg.xml, domain=cfg.target_domain),
         )
-    return mjx_arm.load(domain="source"), mjx_arm.load(domain=cfg.target_domain)
+    return (
+        mjx_arm.load(cfg.model_path, domain="source"),
+        mjx_arm.load(cfg.model_path, domain=cfg.target_domain),
+    )
 
 
 # ------------------------------------------------------------------------------------ methods
@@ -187,20 +469,32 @@ def run_dc(arm_c, commands_c: np.ndarray, k: int, backend: str) -> np.ndarray:
     return every_kth(arm_c.rollout(commands_c, backend=backend), k)
 
 
-def rollout_grouped(arm, jobs: list[tuple[np.ndarray, int]], backend: str) -> list[np.ndarray]:
+def rollout_grouped(
+    arm, jobs: list[tuple[np.ndarray, int]], backend: str, progress: str | None = None
+) -> list[np.ndarray]:
     """Poses of many (commands [T * k, 3] bar, k) jobs, every k-th pose ([T, 6] each).
 
-    Jobs of the same command length and k run as one batched rollout (MuJoCo C: one thread per
-    trajectory; MJX: one vmapped call), so a many-core machine runs them side by side.
+    Jobs of the same command length and k run as batched rollouts (MuJoCo C: one thread per
+    trajectory; MJX: one vmapped call per group), so a many-core machine runs them side by side.
+    With `progress` (the bar's label) a progress bar counts trajectories; on MuJoCo C each group
+    then runs in batches of two trajectories per core, so the bar moves every few seconds (the
+    main job's 245 60 s trajectories at k = 10 take about 1.5 s each on 2 cores) and the poses
+    are the same, as every trajectory is simulated on its own. MJX keeps one call per group
+    (another batch size would compile again).
     """
     groups: dict[tuple, list[int]] = {}
     for i, (cmd, k) in enumerate(jobs):
         groups.setdefault((np.shape(cmd), int(k)), []).append(i)
     out: list[np.ndarray | None] = [None] * len(jobs)
-    for (_, k), index in groups.items():
-        poses = run_dc(arm, np.stack([jobs[i][0] for i in index]), k, backend)
-        for i, p in zip(index, poses, strict=True):
-            out[i] = p
+    batch = 2 * (os.cpu_count() or 1) if progress and backend == "c" else len(jobs)
+    with tqdm(total=len(jobs), desc=progress, unit="traj", disable=not progress) as bar:
+        for (_, k), index in groups.items():
+            for start in range(0, len(index), max(batch, 1)):
+                part = index[start : start + batch]
+                poses = run_dc(arm, np.stack([jobs[i][0] for i in part]), k, backend)
+                for i, p in zip(part, poses, strict=True):
+                    out[i] = p
+                bar.update(len(part))
     return out
 
 
@@ -213,7 +507,7 @@ def choose_stretch_k(arm_s, arm_c, cfg: EvalConfig) -> tuple[int, dict[int, floa
     p_val = shapes.validation_program(cfg.validation_duration_s)
     target = arm_s.rollout(p_val, backend=cfg.backend)
     errors = {}
-    for k in cfg.stretch_candidates:
+    for k in tqdm(cfg.stretch_candidates, desc="stretch k on the validation program", unit="k"):
         poses = run_dc(arm_c, stretch(p_val, k), k, cfg.backend)
         errors[int(k)] = float(metrics.position_error_cm(poses, target).mean())
     return min(errors, key=errors.get), errors
@@ -256,47 +550,41 @@ class Translator:
 
 
 def load_translator(method: str, cfg: EvalConfig) -> tuple[Translator | None, str]:
-    """Imports `ccgan` lazily and loads a translator; (None, why) when there is none."""
-    try:
-        import ccgan
-    except Exception as err:  # noqa: BLE001  (any import failure means "not available")
-        return None, f"ccgan is not importable ({err})"
-    loader = getattr(ccgan, "load_translator", None)
-    if loader is None:
-        return None, "ccgan.load_translator does not exist (yet)"
-    path = None
-    try:
-        if method == "ccgan":
-            from ccgan.translator import translator_path
+    """Loads a translator method's checkpoint (`translator_source`) with `ccgan.load_translator`.
 
-            # The file the loader reads, named so that the per-seed files beside it are found.
-            path = translator_path(cfg.ccgan_path)
-            obj = loader(path=path)
-        elif method == "ccgan_sim":
-            path = cfg.ccgan_sim_path or CCGAN_SIM_DEFAULT_PATH
-            obj = loader(path=path)
-        elif cfg.wcgan_path is not None:
-            path = cfg.wcgan_path
-            obj = loader(path=path)
-        elif WCGAN_DEFAULT_PATH.exists():
-            path = WCGAN_DEFAULT_PATH
-            obj = loader(path=path)
-        else:
-            try:
-                obj = loader(path=None, kind="wcgan")
-            except TypeError:
-                return None, f"no WCGAN-GP translator at {WCGAN_DEFAULT_PATH} (or --wcgan-path)"
-    except Exception as err:  # noqa: BLE001
-        return None, f"no trained {method} translator ({type(err).__name__}: {err})"
-    if obj is None:
-        return None, f"no trained {method} translator"
+    Only a default checkpoint may be absent: then (None, a note naming the file and the flag that
+    gives another). One that was asked for (`translator_source`) and is absent, or any that does
+    not load, raises, so a run never reports a table without the method it was asked to score.
+
+    Returns:
+      (translator, "loaded" or what was loaded) or (None, why).
+
+    Raises:
+      TranslatorError: an asked-for checkpoint is absent, or a checkpoint does not load.
+    """
+    path, asked = translator_source(method, cfg)
+    flag = FLAGS[f"{method}_path"] + (" or $CCGAN_TRANSLATOR" if method == "ccgan" else "")
+    if not path.is_file():
+        if asked:
+            raise TranslatorError(f"{method}: no translator checkpoint at {path} ({flag})")
+        return None, f"no translator at its default {path} (give one with {flag})"
+    from ccgan import load_translator as load
+
+    def checked(file: Path):
+        try:
+            return load(path=file)
+        except Exception as err:  # noqa: BLE001  (any failure to load is this error)
+            raise TranslatorError(
+                f"{method}: {file} does not load ({type(err).__name__}: {err})"
+            ) from err
+
+    obj = checked(path)
     # Separately trained seeds beside the checkpoint (`ccgan.train --seeds 0 1 2` writes
     # translator_seed{s}.ckpt): used when there is one for every evaluation seed.
-    folder = Path(path).parent if path is not None else None
-    if folder is not None and len(cfg.seeds) > 1:
-        files = {s: folder / f"translator_seed{s}.ckpt" for s in cfg.seeds}
+    if len(cfg.seeds) > 1:
+        files = {s: path.parent / f"translator_seed{s}.ckpt" for s in cfg.seeds}
         if all(f.exists() for f in files.values()):
-            seeds = {s: loader(path=f) for s, f in files.items()}
+            seeds = {s: checked(f) for s, f in files.items()}
             return Translator(method, obj, seeds), f"loaded, trained seeds {list(cfg.seeds)}"
     return Translator(method, obj), "loaded"
 
@@ -308,6 +596,7 @@ def oracle_commands(
     k: int,
     cfg: OracleConfig,
     held=False,
+    progress: bool = False,
 ) -> tuple[np.ndarray, dict]:
     """D_c commands that track the targets, optimised through the MJX rollout.
 
@@ -331,6 +620,7 @@ def oracle_commands(
       cfg: oracle settings.
       held: bool, or [S] bools: which programs are held (each init program must then be
         constant over each source step's k periods).
+      progress: show a progress bar over Adam steps (the first compiles: minutes).
 
     Returns:
       (commands [T * k, 3] or [S, T * k, 3] bar, info: "loss_history" [steps] or [steps, S]
@@ -397,7 +687,13 @@ def oracle_commands(
     t0 = time.perf_counter()
     z, opt_state = z0, opt.init(z0)
     best_z, best_loss, history, step_wall_s = z0, np.full(z0.shape[0], np.inf), [], []
-    for _ in range(cfg.steps):
+    steps = tqdm(
+        range(cfg.steps),
+        desc="oracle Adam steps (the 1st compiles)",
+        unit="step",
+        disable=not progress,
+    )
+    for _ in steps:
         t_step = time.perf_counter()
         new_z, opt_state, loss = update(z, opt_state)
         loss = np.asarray(loss)  # the loss of z, before this update
@@ -407,6 +703,7 @@ def oracle_commands(
         best_z = jnp.where(jnp.asarray(better)[:, None, None], z, best_z)
         best_loss = np.where(better, loss, best_loss)
         z = new_z
+        steps.set_postfix(best_loss_max=f"{best_loss.max():.4g}", refresh=False)
     commands = np.asarray(commands_of(best_z), dtype=np.float64)
     history = np.asarray(history).reshape(len(history), z0.shape[0])
     info = {
@@ -474,30 +771,26 @@ def _errors_with_ratio(poses, target, oracle_summary, horizon):
 
 
 def evaluate(cfg: EvalConfig, command: str = "", log=print) -> dict:
-    """Runs the evaluation and writes results/shapes.{md,json}, PNGs and (optionally) MP4s.
+    """Runs the evaluation and writes shapes.{md,json}, PNGs and (optionally) MP4s into
+    `output_dir(cfg)`: results/ for the main job, a new run folder for other settings unless
+    cfg.out_dir names one.
 
     Returns:
       The results dictionary written to shapes.json (trajectories are kept in memory only).
+
+    Raises:
+      TranslatorError: a translator checkpoint that was asked for is absent or does not load;
+        raised before any simulation and before the output folder is made.
     """
     import jax
 
     t_start = time.perf_counter()
-    out_dir = Path(cfg.out_dir)
-    out_dir.mkdir(parents=True, exist_ok=True)
     timings: dict[str, float] = {}
     notes: list[str] = []
-    unknown = [m for m in cfg.methods if m not in METHODS]
-    if unknown:
-        raise ValueError(f"unknown methods {unknown}; known: {METHODS}")
-    bad_shapes = [s for s in cfg.shapes if s not in shapes.SHAPES]
-    if bad_shapes:
-        raise ValueError(f"unknown shapes {bad_shapes}; known: {list(shapes.SHAPES)}")
 
+    # Translators first: a checkpoint that was asked for and does not load stops the run here.
+    # A missing default one is skipped with a note, never imitated.
     t0 = time.perf_counter()
-    arm_s, arm_c = load_arms(cfg)
-    timings["load_s"] = time.perf_counter() - t0
-
-    # Translators, loaded lazily; a missing one is skipped, never imitated.
     translators: dict[str, Translator] = {}
     for method in TRANSLATOR_METHODS:
         if method in cfg.methods:
@@ -515,6 +808,20 @@ def evaluate(cfg: EvalConfig, command: str = "", log=print) -> dict:
                     )
                     notes.append(note)
                     log("NOTE: " + note)
+    timings["translators_s"] = time.perf_counter() - t0
+    model = model_description(cfg)
+    if translators and model["note"] != SOLID_ARM_NOTE and cfg.xml is None:
+        note = f"the arm {model['file']} is {model['note']}."
+        notes.append(note)
+        log("NOTE: " + note)
+    out_dir = output_dir(cfg)
+    cfg = dataclasses.replace(cfg, out_dir=str(out_dir))
+    log(f"writing into {out_dir}" + (" (the committed results)" if is_main_job(cfg) else ""))
+
+    t0 = time.perf_counter()
+    arm_s, arm_c = load_arms(cfg)
+    timings["load_s"] = time.perf_counter() - t0
+
     run_oracle = "oracle" in cfg.methods
     if run_oracle and jax.default_backend() == "cpu" and cfg.xml is None and cfg.oracle.steps > 0:
         if cfg.oracle.horizon_s is None or cfg.oracle.horizon_s > 5.0:
@@ -569,7 +876,9 @@ def evaluate(cfg: EvalConfig, command: str = "", log=print) -> dict:
     # Targets first: the oracle optimises every shape at once (one vmapped MJX rollout).
     t0 = time.perf_counter()
     programs = {shape: shapes.SHAPES[shape](cfg.duration_s) for shape in cfg.shapes}
-    target_list = rollout_grouped(arm_s, [(programs[s], 1) for s in cfg.shapes], cfg.backend)
+    target_list = rollout_grouped(
+        arm_s, [(programs[s], 1) for s in cfg.shapes], cfg.backend, "D_s targets"
+    )
     targets = dict(zip(cfg.shapes, target_list, strict=True))
     timings["targets_s"] = time.perf_counter() - t0
 
@@ -587,7 +896,9 @@ def evaluate(cfg: EvalConfig, command: str = "", log=print) -> dict:
         oracle_sources = np.stack([programs[s][:horizon] for s in cfg.shapes])
         if cfg.oracle.init == "mpc":
             t0 = time.perf_counter()
-            oracle_init, _ = mpc.track(arm_c, oracle_targets, k_stretch, oracle_sources)
+            oracle_init, _ = mpc.track(
+                arm_c, oracle_targets, k_stretch, oracle_sources, progress=True
+            )
             timings["oracle_init_s"] = time.perf_counter() - t0
         else:
             oracle_init = stretch(oracle_sources, k_stretch)
@@ -599,6 +910,7 @@ def evaluate(cfg: EvalConfig, command: str = "", log=print) -> dict:
             k_stretch,
             cfg.oracle,
             cfg.oracle.held,
+            True,
             background=jax.default_backend() != "cpu",
         )
 
@@ -615,15 +927,10 @@ def evaluate(cfg: EvalConfig, command: str = "", log=print) -> dict:
         timings["mpc_s"] = time.perf_counter() - t0
         log(f"mpc: {len(cfg.shapes)} shapes tracked in the D_c simulator, {timings['mpc_s']:.1f} s")
 
-    # Every method, seed, noise level and repetition of every shape: commands first, then one
-    # batched D_c rollout per command length (one thread per trajectory on MuJoCo C).
+    # Every method, seed, noise level and repetition of every shape: commands first, then
+    # batched D_c rollouts per command length (one thread per trajectory on MuJoCo C).
     t0 = time.perf_counter()
-    jobs, keys = [], []
-
-    def add_job(key, method, p_s, target, seed):
-        jobs.append(commands_for(method, key[1], p_s, target, seed))
-        keys.append(key)
-
+    specs = []  # (key, method, source program [T, 3] bar, target [T, 6], seed)
     translated = [m for m in methods if m != "oracle"]
     robust_methods = [
         m for m in ("stretch", *TRANSLATOR_METHODS) if m in methods and cfg.robustness
@@ -632,26 +939,28 @@ def evaluate(cfg: EvalConfig, command: str = "", log=print) -> dict:
         p_s, target = programs[shape], targets[shape]
         for method in translated:
             for seed in seeds_for(method):
-                add_job(("table", shape, method, seed), method, p_s, target, seed)
+                specs.append((("table", shape, method, seed), method, p_s, target, seed))
         for method in robust_methods:
             for std in cfg.noise_stds:
                 for seed in cfg.seeds:
-                    add_job(
-                        ("noise", shape, method, std, seed),
-                        method,
-                        add_noise(p_s, std, seed),
-                        target,
-                        seed,
-                    )
+                    key = ("noise", shape, method, std, seed)
+                    specs.append((key, method, add_noise(p_s, std, seed), target, seed))
             # Repetitions of one translator: a sampling translator draws seeds 0..R-1; one
             # with a model per training seed repeats the first seed's model.
             trained = method in translators and translators[method].trained_seeds
             rep_seeds = [cfg.seeds[0]] * cfg.n_repeats if trained else range(cfg.n_repeats)
             for rep, seed in enumerate(rep_seeds):
-                add_job(("repeat", shape, method, rep), method, p_s, target, seed)
+                specs.append((("repeat", shape, method, rep), method, p_s, target, seed))
+    keys = [spec[0] for spec in specs]
+    jobs = [
+        commands_for(method, key[1], p_s, target, seed)
+        for key, method, p_s, target, seed in tqdm(specs, desc="D_c commands", unit="program")
+    ]
     timings["commands_s"] = time.perf_counter() - t0
     t0 = time.perf_counter()
-    poses_of = dict(zip(keys, rollout_grouped(arm_c, jobs, cfg.backend), strict=True))
+    n_table = sum(key[0] == "table" for key in keys)
+    label = f"D_c rollouts ({n_table} shape x method, {len(keys) - n_table} noise + periodicity)"
+    poses_of = dict(zip(keys, rollout_grouped(arm_c, jobs, cfg.backend, label), strict=True))
     commands_of = dict(zip(keys, jobs, strict=True))
     timings["dc_rollouts_s"] = time.perf_counter() - t0
     log(
@@ -751,7 +1060,9 @@ def evaluate(cfg: EvalConfig, command: str = "", log=print) -> dict:
         "machine": machine_description(),
         "backend": cfg.backend,
         "model_hash": arm_s.model_hash,
-        "config": dataclasses.asdict(cfg) | {"xml": None if cfg.xml is None else "custom"},
+        "model": model,
+        "config": dataclasses.asdict(cfg)
+        | {"xml": None if cfg.xml is None else "custom", "model_path": model["file"]},
         "methods_run": methods,
         "notes": notes,
         "stretch_k": k_stretch,
@@ -761,17 +1072,18 @@ def evaluate(cfg: EvalConfig, command: str = "", log=print) -> dict:
         "periodicity": periodicity,
         "timings": timings,
     }
+    mark = run_mark(results["config"])
     if cfg.plots:
         from eval import plots
 
         t0 = time.perf_counter()
-        results["figures"] = plots.write_all(trajectories, results, out_dir)
+        results["figures"] = plots.write_all(trajectories, results, out_dir, mark)
         timings["plots_s"] = time.perf_counter() - t0
     if cfg.render:
         from eval import render
 
         t0 = time.perf_counter()
-        results["videos"] = render.write_all(arm_s, arm_c, trajectories, cfg, out_dir)
+        results["videos"] = render.write_all(arm_s, arm_c, trajectories, cfg, out_dir, mark)
         timings["render_s"] = time.perf_counter() - t0
     timings["total_s"] = time.perf_counter() - t_start
     results["wall_time_s"] = timings["total_s"]
@@ -880,18 +1192,33 @@ def findings(results: dict) -> list[str]:
 
 
 def markdown_report(results: dict) -> str:
-    """The results as markdown: a Table-I-like table, then the robustness tests."""
+    """The results as markdown: a Table-I-like table, then the robustness tests.
+
+    Every length in it comes from results["config"]; the arm's file and the quick-run mark are
+    stated when results has them (older shapes.json files have neither and render as before).
+    """
     table = results["table"]
     methods = results["methods_run"]
-    lines = [
-        "# Trajectory tracking in D_c (simulator-scored)",
-        "",
+    config = results["config"]
+    mark = run_mark(config)
+    lines = ["# Trajectory tracking in D_c (simulator-scored)", ""]
+    if mark:
+        lines += [f"**{mark}** (`--quick`: a smoke test of the pipeline).", ""]
+    lines += [
         f"- command: `{results['command']}`",
         f"- machine: {results['machine']}",
         f"- simulator backend: {results['backend']}; model hash {results['model_hash']};"
-        f" domains: source -> {results['config'].get('target_domain', 'constrained')}",
+        f" domains: source -> {config.get('target_domain', 'constrained')}",
+    ]
+    if "model" in results:
+        lines.append(
+            f"- arm: `{results['model']['file']}`, {results['model']['note']}; programs"
+            f" {config['duration_s']:g} s per shape, seeds {list(config['seeds'])}"
+        )
+    lines += [
         f"- wall time: {results['wall_time_s']:.1f} s",
-        f"- stretch k = {results['stretch_k']}, chosen by lowest mean X_err on a 20 s validation"
+        f"- stretch k = {results['stretch_k']}, chosen by lowest mean X_err on a"
+        f" {config['validation_duration_s']:g} s validation"
         f" program over k in {list(results['stretch_validation_x_err_cm'])}"
         f" (X_err cm: {_k_errors(results)})",
     ]
@@ -934,7 +1261,7 @@ def markdown_report(results: dict) -> str:
             digits=3,
         )
     if "oracle" in methods:
-        oracle_cfg = results["config"].get("oracle", {})
+        oracle_cfg = config.get("oracle", {})
         held = oracle_cfg.get("held", False)
         loss_first = [row["oracle"].get("oracle_loss_first") for row in table.values()]
         loss_best = [row["oracle"].get("oracle_loss_best") for row in table.values()]
@@ -1017,37 +1344,169 @@ def markdown_report(results: dict) -> str:
 
 # ---------------------------------------------------------------------------------------- CLI
 
+#: EvalConfig fields (OracleConfig's as "oracle.<field>") -> the flag that sets them, so a
+#: ConfigError becomes a usage error that names the flag.
+FLAGS = {
+    "shapes": "--shapes",
+    "methods": "--methods",
+    "seeds": "--seeds",
+    "out_dir": "--out",
+    "backend": "--backend",
+    "duration_s": "--duration",
+    "stretch_candidates": "--stretch-choices",
+    "model_path": "--model",
+    "target_domain": "--target-domain",
+    "ccgan_path": "--ccgan-path",
+    "wcgan_path": "--wcgan-path",
+    "ccgan_sim_path": "--ccgan-sim-path",
+    "oracle.steps": "--oracle-steps",
+    "oracle.learning_rate": "--oracle-lr",
+    "oracle.init": "--oracle-init",
+    "oracle.horizon_s": "--oracle-horizon",
+}
 
-def parse_args(argv: list[str] | None = None) -> EvalConfig:
-    """EvalConfig from command-line flags (see --help)."""
+
+class _HelpFormatter(argparse.ArgumentDefaultsHelpFormatter):
+    """Appends each option's default to its help, except where the help already says what a
+    None default means (e.g. --out, whose default depends on the other settings)."""
+
+    def _get_help_string(self, action):
+        if "(default:" in (action.help or ""):
+            return action.help
+        return super()._get_help_string(action)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The `python -m eval.shapes` parser: one line of help per option, with its default."""
     p = argparse.ArgumentParser(
-        prog="python -m eval.shapes", description="Trajectory-tracking evaluation in D_c."
+        prog="python -m eval.shapes",
+        formatter_class=_HelpFormatter,
+        description=(
+            "Trajectory-tracking evaluation in D_c: the five shapes, each method's D_c commands"
+            " scored in the simulator. The main job (`--render` and every other default) REWRITES"
+            " the committed results in results/ (shapes.md, shapes.json, plots, videos); --quick"
+            f" and any other settings write a new folder {RUNS_DIR}/<quick|custom>-<time>/ unless"
+            " --out names one. Every option is checked before any work."
+        ),
     )
-    p.add_argument("--shapes", nargs="+", default=list(shapes.SHAPES), choices=list(shapes.SHAPES))
-    p.add_argument("--methods", nargs="+", default=None, choices=list(METHODS))
-    p.add_argument("--seeds", nargs="+", type=int, default=[0, 1, 2])
-    p.add_argument("--out", default="results")
-    p.add_argument("--backend", "--device", dest="backend", choices=["c", "mjx"], default="c")
-    p.add_argument("--duration", type=float, default=60.0, help="program length (s)")
+    p.add_argument(
+        "--shapes",
+        nargs="+",
+        default=list(shapes.SHAPES),
+        choices=list(shapes.SHAPES),
+        metavar="SHAPE",
+        help=f"shapes to track, of {', '.join(shapes.SHAPES)}",
+    )
+    p.add_argument(
+        "--methods",
+        nargs="+",
+        default=None,
+        choices=list(METHODS),
+        metavar="METHOD",
+        help=f"methods to score, of {', '.join(METHODS)} (default: "
+        + " ".join(DEFAULT_METHODS)
+        + ", less the oracle on"
+        " a CPU)",
+    )
+    p.add_argument(
+        "--seeds",
+        metavar="SEED",
+        nargs="+",
+        type=int,
+        default=[0, 1, 2],
+        help="seeds (>= 0): noise draws, and trained models per seed",
+    )
+    p.add_argument(
+        "--out",
+        metavar="DIR",
+        default=None,
+        help=f"output folder (default: {RESULTS_DIR}/ for the main job, else a new"
+        f" {RUNS_DIR}/<quick|custom>-<time>/)",
+    )
+    p.add_argument(
+        "--backend",
+        "--device",
+        dest="backend",
+        choices=["c", "mjx"],
+        default="c",
+        help="simulator of every rollout but the oracle's: MuJoCo C or MJX",
+    )
+    p.add_argument(
+        "--duration",
+        metavar="SECONDS",
+        type=float,
+        default=EvalConfig.duration_s,
+        help="length of each shape program (s)",
+    )
+    p.add_argument(
+        "--stretch-choices",
+        metavar="K",
+        nargs="+",
+        type=int,
+        default=list(EvalConfig.stretch_candidates),
+        help="stretch factors k >= 1 (control periods per source step) tried",
+    )
     p.add_argument("--render", action="store_true", help="write MP4 videos")
-    p.add_argument("--quick", action="store_true", help="10 s programs, one seed, no oracle")
+    p.add_argument(
+        "--quick",
+        action="store_true",
+        help="smoke run: programs of at most 10 s, first seed, 10 s validation, 2 repetitions;"
+        f" into a new {RUNS_DIR}/quick-<time>/ unless --out; marked on every plot and in shapes.md",
+    )
     p.add_argument("--no-robustness", action="store_true", help="skip noise/periodicity tests")
     p.add_argument(
+        "--model",
+        metavar="MJCF",
+        default=EvalConfig.model_path,
+        help="MJCF file of the arm (default: the old solid-disc arm that the committed"
+        " translators were trained on, models/softarm_solid.xml)",
+    )
+    p.add_argument(
         "--target-domain",
-        default="constrained",
+        default=EvalConfig.target_domain,
         choices=["constrained", "aged"],
         help="D_c: the paper's viscous medium, or the aged arm (stiffness x0.7, same medium)",
     )
-    p.add_argument("--ccgan-path", default=None)
-    p.add_argument("--wcgan-path", default=None)
-    p.add_argument("--ccgan-sim-path", default=None)
+    p.add_argument(
+        "--ccgan-path",
+        metavar="CKPT",
+        default=None,
+        help="CCGAN-GP translator checkpoint (default:"
+        " $CCGAN_TRANSLATOR, else results/ccgan/translator.ckpt, skipped if absent)",
+    )
+    p.add_argument(
+        "--wcgan-path",
+        metavar="CKPT",
+        default=None,
+        help="WCGAN-GP translator checkpoint (default:"
+        " results/wcgan/translator.ckpt, skipped if absent)",
+    )
+    p.add_argument(
+        "--ccgan-sim-path",
+        metavar="CKPT",
+        default=None,
+        help="fine-tuned CCGAN-GP checkpoint"
+        " (default: results/ccgan_sim8/translator.ckpt, skipped if absent)",
+    )
     p.add_argument(
         "--oracle-per-period",
         action="store_true",
-        help="oracle with a free command per control period (default: held k periods)",
+        help="oracle with a free command per control period (not held k periods)",
     )
-    p.add_argument("--oracle-steps", type=int, default=OracleConfig.steps)
-    p.add_argument("--oracle-lr", type=float, default=OracleConfig.learning_rate)
+    p.add_argument(
+        "--oracle-steps",
+        metavar="N",
+        type=int,
+        default=OracleConfig.steps,
+        help="the oracle's Adam steps (>= 1)",
+    )
+    p.add_argument(
+        "--oracle-lr",
+        metavar="LR",
+        type=float,
+        default=OracleConfig.learning_rate,
+        help="the oracle's Adam step size on the sigmoid logits",
+    )
     p.add_argument(
         "--oracle-init",
         choices=["mpc", "stretch"],
@@ -1056,65 +1515,68 @@ def parse_args(argv: list[str] | None = None) -> EvalConfig:
     )
     p.add_argument(
         "--oracle-horizon",
+        metavar="SECONDS",
         type=float,
         default=OracleConfig.horizon_s,
         help="seconds optimised by the oracle; <= 0 for the whole program",
     )
-    a = p.parse_args(argv)
-    methods = a.methods
-    if methods is None:
-        import jax
+    return p
 
-        methods = list(DEFAULT_METHODS)
-        if jax.default_backend() == "cpu":
-            # Measured on a 2-core CPU: 500 s for 10 Adam steps of five 2 s programs at k = 10
-            # (results/full at commit 7e006b8), which would take the main job past 15 min.
-            methods.remove("oracle")
-            print(
-                "NOTE: oracle left out by default on CPU (MJX gradients: ~8 min more on 2 cores"
-                " with --oracle-steps 10); add it with --methods ... oracle."
-            )
+
+def parse_args(argv: list[str] | None = None) -> EvalConfig:
+    """EvalConfig from command-line flags (see --help); a setting EvalConfig refuses exits with
+    a usage error naming its flag, before any work."""
+    p = build_parser()
+    a = p.parse_args(argv)
+    methods = default_methods() if a.methods is None else a.methods
     horizon = None if a.oracle_horizon is not None and a.oracle_horizon <= 0 else a.oracle_horizon
-    cfg = EvalConfig(
-        shapes=tuple(a.shapes),
-        methods=tuple(methods),
-        seeds=tuple(a.seeds),
-        duration_s=a.duration,
-        backend=a.backend,
-        render=a.render,
-        robustness=not a.no_robustness,
-        out_dir=a.out,
-        ccgan_path=a.ccgan_path,
-        wcgan_path=a.wcgan_path,
-        ccgan_sim_path=a.ccgan_sim_path,
-        target_domain=a.target_domain,
-        oracle=OracleConfig(
-            steps=a.oracle_steps,
-            learning_rate=a.oracle_lr,
-            horizon_s=horizon,
-            held=not a.oracle_per_period,
-            init=a.oracle_init,
-        ),
-    )
-    if a.quick:
-        cfg = dataclasses.replace(
-            cfg,
-            duration_s=min(cfg.duration_s, 10.0),
-            seeds=cfg.seeds[:1],
-            validation_duration_s=10.0,
-            n_repeats=2,
+    try:
+        cfg = EvalConfig(
+            shapes=tuple(a.shapes),
+            methods=tuple(methods),
+            seeds=tuple(a.seeds),
+            duration_s=a.duration,
+            backend=a.backend,
+            stretch_candidates=tuple(a.stretch_choices),
+            render=a.render,
+            robustness=not a.no_robustness,
+            out_dir=a.out,
+            model_path=a.model,
+            ccgan_path=a.ccgan_path,
+            wcgan_path=a.wcgan_path,
+            ccgan_sim_path=a.ccgan_sim_path,
+            target_domain=a.target_domain,
+            oracle=OracleConfig(
+                steps=a.oracle_steps,
+                learning_rate=a.oracle_lr,
+                horizon_s=horizon,
+                held=not a.oracle_per_period,
+                init=a.oracle_init,
+            ),
+        )
+        cfg = quick(cfg) if a.quick else cfg
+    except ConfigError as err:
+        p.error(f"{FLAGS.get(err.field, err.field)}: {err.reason}")
+    if a.methods is None and "oracle" not in methods:
+        print(
+            "NOTE: oracle left out by default on CPU (MJX gradients: ~8 min more on 2 cores"
+            " with --oracle-steps 10); add it with --methods ... oracle."
         )
     return cfg
 
 
 def main(argv: list[str] | None = None) -> dict:
-    """Thin entry point: parse flags, evaluate, print the wall time."""
+    """Thin entry point: parse flags, evaluate, print the wall time. A translator checkpoint
+    that does not load ends the run with an error (exit status 1) before any work."""
     from mjx_arm.machine import enable_compilation_cache
 
     cfg = parse_args(argv)
     enable_compilation_cache()
     command = "python -m eval.shapes " + " ".join(sys.argv[1:] if argv is None else argv)
     t0 = time.perf_counter()
-    results = evaluate(cfg, command=command.strip())
+    try:
+        results = evaluate(cfg, command=command.strip())
+    except TranslatorError as err:
+        raise SystemExit(f"python -m eval.shapes: error: {err}") from None
     print(f"total wall time: {time.perf_counter() - t0:.1f} s")
     return results

@@ -143,7 +143,7 @@ def test_replay_matches_rollout(small_xml):
         np.testing.assert_allclose(data.site_xpos[arm.tip_site_id], poses[t, :3], atol=1e-12)
 
 
-def test_tiny_end_to_end(small_xml, tmp_path):
+def test_tiny_end_to_end(small_xml, tmp_path, capsys):
     import shutil
 
     # A WCGAN-GP stand-in with one model per training seed (copies of the shipped translator),
@@ -204,6 +204,11 @@ def test_tiny_end_to_end(small_xml, tmp_path):
     assert w == 3 * 128 and h == 96
     assert first.std() > 5.0  # not a blank frame
     assert (tmp_path / "shape_circle.png").exists()
+    # Every long job shows a progress bar (on stderr).
+    err = capsys.readouterr().err
+    for bar in ("stretch k on the validation program", "D_c commands", "D_c rollouts"):
+        assert bar in err
+    assert "rendering videos" in err and "frame" in err
 
 
 def test_translator_per_trained_seed(tmp_path):
@@ -217,7 +222,8 @@ def test_translator_per_trained_seed(tmp_path):
     two = pipeline.load_translator("ccgan", pipeline.EvalConfig(seeds=(0, 1), ccgan_path=path))[0]
     assert sorted(two.trained_seeds) == [0, 1] and two.takes_seed
     p_s = np.full((4, 3), 1.0)
-    commands, k = two.translate(p_s, np.zeros((4, 6)), seed=1)
+    rest = np.tile([0.0, 0.0, -0.2, 0.0, 0.0, 1.0], (4, 1))  # tip (m), unit d3
+    commands, k = two.translate(p_s, rest, seed=1)
     assert commands.shape == (4 * k, 3)
     # A seed without its own model: the single checkpoint serves every seed.
     three = pipeline.load_translator("ccgan", pipeline.EvalConfig(seeds=(0, 1, 2), ccgan_path=path))
@@ -281,7 +287,7 @@ def test_oracle_lowers_the_loss_and_batches_like_one_program(small_xml):
         pipeline.oracle_commands(arm_c, targets, both, k, cfg, held=True)
 
 
-def test_mpc_method_and_the_oracle_starting_from_it(small_xml, tmp_path):
+def test_mpc_method_and_the_oracle_starting_from_it(small_xml, tmp_path, capsys):
     """The mpc row is the receding-horizon tracker's; the oracle starts from its commands."""
     cfg = pipeline.EvalConfig(
         shapes=("circle", "kite"),
@@ -314,6 +320,8 @@ def test_mpc_method_and_the_oracle_starting_from_it(small_xml, tmp_path):
         np.testing.assert_allclose(row["oracle"]["oracle_loss_first"], start_loss, rtol=1e-3)
         assert row["oracle"]["oracle_loss_best"] <= row["oracle"]["oracle_loss_first"]
     assert "| shape | stretch | mpc | oracle |" in (tmp_path / "shapes.md").read_text()
+    err = capsys.readouterr().err
+    assert "oracle Adam steps" in err and "mpc" in err
     with pytest.raises(ValueError, match="oracle init"):
         pipeline.OracleConfig(init="zeros")
 

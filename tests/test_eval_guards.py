@@ -1,0 +1,300 @@
+"""Guards of eval.shapes: nothing overwritten, nothing mixed, no wrong answer with exit status 0.
+
+A quick run never writes results/, every setting is refused before any work, a translator that
+was asked for must load, reports state their lengths and arm, and long jobs show progress.
+"""
+
+import hashlib
+import json
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pytest
+from PIL import Image
+
+import eval  # noqa: F401  (first: sets MUJOCO_GL before mujoco is imported)
+import mjx_arm  # noqa: F401  (before jax)
+from eval import pipeline, plots
+from mjx_arm import constants
+
+ROOT = Path(__file__).resolve().parent.parent
+SHIPPED = ROOT / "results" / "ccgan" / "translator.ckpt"
+
+
+def _file_hash(path) -> str:
+    """The model hash `mjx_arm.load` gives a file: sha256 of its text, first 16 hex digits."""
+    return hashlib.sha256(Path(path).read_text().encode()).hexdigest()[:16]
+
+
+@pytest.fixture
+def in_tmp(tmp_path, monkeypatch):
+    """Runs the test in an empty folder, with no translator chosen through the environment."""
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.delenv("CCGAN_TRANSLATOR", raising=False)
+    return tmp_path
+
+
+def test_quick_run_defaults_to_a_new_run_folder_never_results(in_tmp):
+    cfg = pipeline.parse_args(["--quick", "--render"])
+    assert cfg.quick and cfg.duration_s == 10.0 and cfg.seeds == (0,) and cfg.out_dir is None
+    first, second = pipeline.output_dir(cfg), pipeline.output_dir(cfg)
+    for out in (first, second):
+        assert out.parent == Path(pipeline.RUNS_DIR) and out.name.startswith("quick-")
+        assert out.is_dir()
+    assert first != second  # two quick runs never share (and overwrite) a folder
+    # Other settings than the main job's: a run folder too.
+    custom = pipeline.output_dir(pipeline.parse_args(["--duration", "30"]))
+    assert custom.parent == Path(pipeline.RUNS_DIR) and custom.name.startswith("custom-")
+    assert not Path("results").exists()
+    # The main job (with or without videos) regenerates results/; --out is always obeyed.
+    assert pipeline.output_dir(pipeline.parse_args(["--render"])) == Path("results")
+    assert pipeline.output_dir(pipeline.parse_args([])) == Path("results")
+    assert pipeline.output_dir(pipeline.parse_args(["--quick", "--out", "results"])) == Path(
+        "results"
+    )
+
+
+def test_quick_run_is_marked_and_states_its_arm_and_lengths(in_tmp, capsys):
+    """A tiny quick run on the default arm: a run folder, marked plots and report, the solid-disc
+    arm named, every length from the config, progress bars on stderr."""
+    cfg = pipeline.quick(
+        pipeline.EvalConfig(
+            shapes=("circle",),
+            methods=("none", "stretch"),
+            duration_s=1.0,
+            stretch_candidates=(1, 2),
+            validation_duration_s=0.5,
+            robustness=False,
+        )
+    )
+    data = pipeline.evaluate(cfg, command="test", log=lambda *_: None)
+    (out,) = Path(pipeline.RUNS_DIR).iterdir()
+    assert out.name.startswith("quick-") and not Path("results").exists()
+    assert data["config"]["out_dir"] == str(out)
+    # The default arm is the solid-disc one the committed translators were trained on.
+    assert data["model_hash"] == _file_hash(constants.SOLID_MODEL_PATH)
+    assert data["model"]["file"] == "models/softarm_solid.xml"
+    md = (out / "shapes.md").read_text()
+    assert "QUICK RUN: 1 s programs, seeds [0]" in md
+    assert "`models/softarm_solid.xml`, the old solid-disc arm" in md
+    assert "0.5 s validation program" in md and "20 s validation" not in md
+    assert json.loads((out / "shapes.json").read_text())["config"]["quick"] is True
+    figures = [out / f for f in data["figures"]]
+    assert figures
+    for png in figures:
+        assert Image.open(png).text.get("Comment", "").startswith("QUICK RUN"), png
+    err = capsys.readouterr().err
+    assert "stretch k on the validation program" in err and "D_c rollouts" in err
+
+
+def test_committed_report_regenerates_and_its_lengths_come_from_the_config():
+    results = json.loads((ROOT / "results" / "shapes.json").read_text())
+    assert pipeline.markdown_report(results) == (ROOT / "results" / "shapes.md").read_text()
+    results["config"]["validation_duration_s"] = 10.0
+    md = pipeline.markdown_report(results)
+    assert "on a 10 s validation program" in md and "20 s validation" not in md
+    results["config"].update(quick=True, duration_s=10.0, seeds=[0])
+    assert "QUICK RUN: 10 s programs, seeds [0]" in pipeline.markdown_report(results)
+
+
+def test_figures_of_a_quick_run_carry_the_mark(tmp_path):
+    t = np.linspace(0, 1, 20)
+    target = np.stack(
+        [0.01 * np.cos(t), 0.01 * np.sin(t), -0.2 + 0 * t] + [0 * t] * 2 + [1 + 0 * t]
+    )
+    traj = {"target": target.T, "poses": {"stretch": target.T + 1e-3}}
+    plots.paths_figure("circle", traj, tmp_path / "plain.png")
+    plots.paths_figure("circle", traj, tmp_path / "marked.png", "QUICK RUN: test")
+    plain, marked = (Image.open(tmp_path / f"{n}.png") for n in ("plain", "marked"))
+    assert "Comment" not in plain.text and marked.text["Comment"] == "QUICK RUN: test"
+    changed = np.abs(np.asarray(plain, float) - np.asarray(marked, float)).max(-1) > 60
+    assert changed.sum() > 2000  # visible: the mark's letters, across the figure
+
+
+@pytest.mark.parametrize(
+    ("argv", "flag", "reason"),
+    [
+        (["--stretch-choices", "0"], "--stretch-choices", "k >= 1"),
+        (["--stretch-choices", "5", "5"], "--stretch-choices", "distinct"),
+        (["--methods", "bogus"], "--methods", "invalid choice"),
+        (["--shapes", "square"], "--shapes", "invalid choice"),
+        (["--duration", "0"], "--duration", "at least one 0.1 s command"),
+        (["--duration", "-5"], "--duration", "at least one 0.1 s command"),
+        (["--duration", "nan"], "--duration", "at least one 0.1 s command"),
+        (["--seeds"], "--seeds", "expected at least one argument"),
+        (["--seeds", "-1"], "--seeds", ">= 0"),
+        (["--seeds", "1", "1"], "--seeds", "distinct"),
+        (["--out", "a_file"], "--out", "is a file"),
+        (["--model", "nope.xml"], "--model", "no such file"),
+        (["--ccgan-path", "nope.ckpt"], "--ccgan-path", "no such file"),
+        (["--wcgan-path", "nope.ckpt"], "--wcgan-path", "no such file"),
+        (["--ccgan-sim-path", "nope.ckpt"], "--ccgan-sim-path", "no such file"),
+        (["--oracle-steps", "0"], "--oracle-steps", "at least one Adam step"),
+        (["--oracle-lr", "-1"], "--oracle-lr", "> 0"),
+        (["--oracle-horizon", "nan"], "--oracle-horizon", "at least one 0.1 s command"),
+    ],
+)
+def test_bad_options_are_usage_errors_before_any_work(in_tmp, capsys, argv, flag, reason):
+    Path("a_file").write_text("not a folder")
+    with pytest.raises(SystemExit) as exc:
+        pipeline.parse_args(argv)
+    assert exc.value.code == 2
+    err = capsys.readouterr().err
+    assert "usage: python -m eval.shapes" in err and flag in err and reason in err, err
+    assert sorted(p.name for p in in_tmp.iterdir()) == ["a_file"]  # nothing written
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "field"),
+    [
+        ({"stretch_candidates": (0,)}, "stretch_candidates"),
+        ({"stretch_candidates": ()}, "stretch_candidates"),
+        ({"methods": ("bogus",)}, "methods"),
+        ({"methods": ()}, "methods"),
+        ({"shapes": ("square",)}, "shapes"),
+        ({"seeds": ()}, "seeds"),
+        ({"duration_s": 0.0}, "duration_s"),
+        ({"validation_duration_s": -1.0}, "validation_duration_s"),
+        ({"noise_stds": (-0.1,)}, "noise_stds"),
+        ({"n_repeats": 0}, "n_repeats"),
+        ({"backend": "gpu"}, "backend"),
+        ({"target_domain": "source"}, "target_domain"),
+        ({"out_dir": "a_file"}, "out_dir"),
+        ({"model_path": "nope.xml"}, "model_path"),
+        ({"ccgan_path": "nope.ckpt"}, "ccgan_path"),
+        ({"video_fps": 0}, "video_fps"),
+    ],
+)
+def test_eval_config_refuses_bad_settings(in_tmp, kwargs, field):
+    Path("a_file").write_text("not a folder")
+    with pytest.raises(pipeline.ConfigError) as exc:
+        pipeline.EvalConfig(**kwargs)
+    assert exc.value.field == field
+
+
+def test_oracle_config_refuses_bad_settings():
+    for kwargs in ({"steps": 0}, {"learning_rate": 0.0}, {"horizon_s": 0.0}, {"init": "zeros"}):
+        with pytest.raises(pipeline.ConfigError):
+            pipeline.OracleConfig(**kwargs)
+
+
+def test_help_names_the_program_and_shows_every_default():
+    parser = pipeline.build_parser()
+    assert parser.prog == "python -m eval.shapes"
+    assert "REWRITES the committed results in results/" in parser.description
+    formatter = parser._get_formatter()
+    for action in parser._actions:
+        if action.dest == "help":
+            continue
+        text = formatter._get_help_string(action)
+        assert action.help and "default" in text, action.option_strings
+
+
+def test_a_translator_that_was_asked_for_must_load(small_xml, tmp_path, monkeypatch):
+    monkeypatch.delenv("CCGAN_TRANSLATOR", raising=False)
+    bad = tmp_path / "bad.ckpt"
+    bad.write_bytes(b"not a checkpoint")
+    cfg = pipeline.EvalConfig(
+        shapes=("circle",),
+        methods=("none", "ccgan"),
+        ccgan_path=str(bad),
+        duration_s=1.0,
+        stretch_candidates=(1,),
+        validation_duration_s=0.5,
+        robustness=False,
+        plots=False,
+        xml=small_xml,
+        out_dir=str(tmp_path / "out"),
+    )
+    with pytest.raises(pipeline.TranslatorError, match="does not load"):
+        pipeline.evaluate(cfg, command="test", log=lambda *_: None)
+    assert not (tmp_path / "out").exists()  # stopped before any work or file
+    # $CCGAN_TRANSLATOR is a choice too: a missing file there is an error, not a skip.
+    monkeypatch.setenv("CCGAN_TRANSLATOR", str(tmp_path / "nope.ckpt"))
+    with pytest.raises(pipeline.TranslatorError, match="no translator checkpoint"):
+        pipeline.load_translator("ccgan", pipeline.EvalConfig(methods=("ccgan",)))
+    # From the command line: a non-zero exit naming the file.
+    monkeypatch.delenv("CCGAN_TRANSLATOR")
+    argv = ["--methods", "none", "ccgan", "--ccgan-path", str(bad), "--shapes", "circle"]
+    argv += ["--duration", "0.5", "--no-robustness", "--out", str(tmp_path / "cli")]
+    with pytest.raises(SystemExit) as exc:
+        pipeline.main(argv)
+    assert exc.value.code not in (0, None) and "does not load" in str(exc.value.code)
+    assert not (tmp_path / "cli").exists()
+
+
+def test_missing_default_translators_are_skipped_with_a_note(tmp_path, monkeypatch):
+    """Only a default checkpoint may be absent; the note names the file and the flag."""
+    import ccgan.translator
+
+    monkeypatch.delenv("CCGAN_TRANSLATOR", raising=False)
+    missing = tmp_path / "missing" / "translator.ckpt"
+    monkeypatch.setattr(ccgan.translator, "DEFAULT_PATH", missing)
+    monkeypatch.setattr(pipeline, "CCGAN_SIM_DEFAULT_PATH", missing)
+    monkeypatch.setattr(pipeline, "WCGAN_DEFAULT_PATH", missing)
+    cfg = pipeline.EvalConfig()
+    for method, flag in (
+        ("ccgan", "--ccgan-path"),
+        ("ccgan_sim", "--ccgan-sim-path"),
+        ("wcgan", "--wcgan-path"),
+    ):
+        tr, why = pipeline.load_translator(method, cfg)
+        assert tr is None and str(missing) in why and flag in why, why
+    # A default that is there but does not load is an error, not a skip.
+    missing.parent.mkdir()
+    missing.write_bytes(b"corrupt")
+    with pytest.raises(pipeline.TranslatorError, match="does not load"):
+        pipeline.load_translator("wcgan", cfg)
+
+
+def test_wcgan_default_path_calls_the_loader_only_with_a_file(tmp_path, monkeypatch):
+    """The WCGAN-GP default: absent -> skipped without calling `ccgan.load_translator` (which
+    takes no `kind`); present -> loaded from it, with the trained seeds beside it."""
+    import ccgan
+
+    calls = []
+    real = ccgan.load_translator
+
+    def spy(*args, **kwargs):
+        calls.append(kwargs)
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(ccgan, "load_translator", spy)
+    default = tmp_path / "wcgan" / "translator.ckpt"
+    monkeypatch.setattr(pipeline, "WCGAN_DEFAULT_PATH", default)
+    cfg = pipeline.EvalConfig(seeds=(0, 1))
+    tr, why = pipeline.load_translator("wcgan", cfg)
+    assert tr is None and calls == [] and str(default) in why
+    default.parent.mkdir()
+    for name in ("translator.ckpt", "translator_seed0.ckpt", "translator_seed1.ckpt"):
+        shutil.copy(SHIPPED, default.parent / name)
+    tr, why = pipeline.load_translator("wcgan", cfg)
+    assert sorted(tr.trained_seeds) == [0, 1], why
+    assert [Path(c["path"]).name for c in calls] == [
+        "translator.ckpt",
+        "translator_seed0.ckpt",
+        "translator_seed1.ckpt",
+    ]
+    rest = np.tile([0.0, 0.0, -0.2, 0.0, 0.0, 1.0], (4, 1))  # tip (m), unit d3
+    commands, k = tr.translate(np.full((4, 3), 1.0), rest, seed=1)
+    assert commands.shape == (4 * k, 3)
+
+
+def test_default_arm_is_the_solid_disc_one_and_model_path_is_used(small_xml, tmp_path):
+    assert pipeline.EvalConfig().model_path == str(constants.SOLID_MODEL_PATH)
+    described = pipeline.model_description(pipeline.EvalConfig())
+    assert described["file"] == "models/softarm_solid.xml"
+    assert "old solid-disc arm" in described["note"]
+    other = tmp_path / "small.xml"
+    other.write_text(small_xml)
+    cfg = pipeline.EvalConfig(model_path=str(other))
+    arm_s, arm_c = pipeline.load_arms(cfg)
+    assert arm_s.model_hash == arm_c.model_hash == _file_hash(other)
+    assert (
+        "not the arm the committed translators were trained on"
+        in (pipeline.model_description(cfg)["note"])
+    )
+    # MJCF text wins over the file.
+    arm_x, _ = pipeline.load_arms(pipeline.EvalConfig(xml=small_xml, model_path="ignored.xml"))
+    assert arm_x.model_hash == hashlib.sha256(small_xml.encode()).hexdigest()[:16]
