@@ -280,8 +280,8 @@ def remove_stale_temporaries(path: str | os.PathLike) -> list[Path]:
         if not name.startswith(prefix) or not name.endswith((".tmp", ".old")):
             continue
         pid = name[len(prefix) :].split(".", 1)[0]
-        if pid.isdigit() and _alive(int(pid)):
-            continue
+        if not pid.isdigit() or _alive(int(pid)):
+            continue  # not one of ours (e.g. ".out.npz.<pid>...tmp" beside folder "out"), or live
         if name.endswith(".old") and not path.exists():
             os.replace(entry, path)
         elif entry.is_dir() and not entry.is_symlink():

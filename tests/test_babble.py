@@ -373,6 +373,10 @@ def test_run_replaces_its_folder_only_when_complete(tmp_path, xml, monkeypatch):
     assert os.listdir(tmp_path) == ["out"]
     assert sorted(os.listdir(out)) == ["manifest.json", "source_train.npz", "source_val.npz"]
     assert [dataset.load_dataset(p).seed for p in paths] == [7, 7]
+    # Killed between its two renames, a run leaves the earlier folder moved aside: put back.
+    os.replace(out, tmp_path / f".out.{dead}.ghi.old")
+    assert len(dataset.remove_stale_temporaries(out)) == 1 and os.listdir(tmp_path) == ["out"]
+    assert dataset.load_dataset(out / "source_val.npz").seed == 7
 
 
 def test_folder_refuses_a_mixed_or_partial_set(datasets, tmp_path):
