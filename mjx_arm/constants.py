@@ -39,4 +39,14 @@ CUSTOM_VALVE_FIELDS = {
     "valve_p_max": P_MAX_BAR,
 }
 
+#: The <custom><numeric> field with the constrained medium's viscosity over the source's, which
+#: `mjx_arm.fit` fits per model and `mjx_arm.domains.CONSTRAINED` applies.
+CUSTOM_CONSTRAINED_SCALE = "constrained_viscosity_scale"
+
 BAR_TO_PA = 1.0e5
+
+#: The paper code's media: translational damping constants c (1/s) of its damper
+#: v <- v exp(-c dt), source and constrained, applied every `PAPER_TIMESTEP_S`.
+PAPER_DAMPING_PER_S = {"source": 800.0, "constrained": 8000.0}
+#: The paper code's simulator step (s) (PyElastica, position Verlet).
+PAPER_TIMESTEP_S = 2e-4

@@ -14,19 +14,26 @@ Choices (each differs from PyElastica only where it says so):
     first element, which moves the effective clamp half an element up and makes the cantilever
     error first order in 1 / n; this clamp keeps it second order.)
   * Stiffnesses are not rescaled by the local dilatation (PyElastica divides by powers of the
-    stretch e); strains here stay below ~1%, so the difference is below ~1% of a strain.
+    stretch e): forces are linear in the strains, curvature is per rest length, the same law
+    the MuJoCo chain's linear joint springs follow at any stretch.
   * Couples pass between neighbours as world vectors in the frame halfway between them, so
     internal couples cancel exactly (PyElastica adds kappa x B kappa for the same effect).
   * Each pressurised chamber adds an internal (active) resultant on the span it covers: an axial
     force -F d3 and a couple F (d3 x r) with r its offset, as the fluid in the lumen pushes the
     distal end cap. A free rod then stretches by F / EA and bends with curvature F |r| / EI away
     from the chamber, the same sign as the MuJoCo model.
-  * Damping is PyElastica's analytical linear damper: after each step v <- v exp(-c dt) and
-    omega <- omega exp(-c_rot dt m_e / J), unconditionally stable.
+  * Damping is PyElastica's analytical linear damper, as the paper code used it: after each
+    step v <- v exp(-c dt) and omega <- omega exp(-c_rot dt m_e / J), unconditionally stable.
+    It removes as much speed as a linear drag of rate (exp(c dt) - 1) / dt would
+    (`mjx_arm.fitted.damper_drag_rate_per_s`), so the medium depends on dt; the rod runs at
+    the paper code's 2e-4 s.
+  * The section (`mjx_arm.section`) sets A, I and J, and the element's rotational inertia is its
+    mass times the section's radius of gyration squared (I / A, J / A): mass spread like the
+    load-carrying area.
 
 Time integration is position Verlet (half drift, kick, half drift), explicit, in float64 (the
-public functions run under `jax.enable_x64`). The timestep comes from a stability bound on the
-fastest element mode (see `CosseratParams.max_frequency_rad_s`).
+public functions run under `jax.enable_x64`). The timestep is the paper code's 2e-4 s, checked
+against a stability bound on the fastest element mode (`CosseratParams.max_frequency_rad_s`).
 
 Pose: tip node position (m) then d3 of the last element (its unit tangent). The arm hangs along
 -z from a base at the origin; at rest d1 = +x, d2 = -y, d3 = -z, and chamber k sits at angle
@@ -49,12 +56,9 @@ from mjx_arm.model_gen import ArmParams
 
 _ARM = ArmParams()
 
-#: Density of the paper simulator's rod (kg/m^3) [paper code]. The reference rod uses it, so the
-#: paper's per-mass damping constants give the paper's medium (force per length c rho A); the
-#: MuJoCo arm keeps the paper text's 183 g and has its medium fitted (`mjx_arm.fit`).
-PAPER_DENSITY_KG_M3 = 1104.0
-#: Translational damping constants (1/s) of the paper's two domains [paper code].
-DOMAIN_DAMPING_PER_S = {"source": 800.0, "constrained": 8000.0}
+#: Translational damping constants (1/s) of the paper's two domains [paper code]: per unit mass,
+#: so the medium's force per length is c times the mass per length.
+DOMAIN_DAMPING_PER_S = constants.PAPER_DAMPING_PER_S
 #: Pose layout: tip position (m) then unit d3.
 POSE_DIM = 6
 
@@ -63,17 +67,21 @@ POSE_DIM = 6
 class CosseratParams:
     """Physical and numerical parameters of the reference rod.
 
-    Geometry and elasticity default to `mjx_arm.model_gen.ArmParams`'s physical values (never
-    its fitted factors), density to the paper code's 1104 kg/m^3, damping to the paper's source
-    domain.
+    Geometry, section, mass and elasticity default to `mjx_arm.model_gen.ArmParams`'s physical
+    values (never its fitted factors; `from_arm` takes another arm's), damping to the paper's
+    source domain, the timestep to the paper code's.
     """
 
     length_m: float = _ARM.length_m
     """Rod length (m)."""
-    radius_m: float = _ARM.radius_m
-    """Cross-section radius (m)."""
-    mass_kg: float = PAPER_DENSITY_KG_M3 * math.pi * _ARM.radius_m**2 * _ARM.length_m
-    """Total mass (kg), spread uniformly [paper code's density: 0.624 kg for 0.2 m]."""
+    area_m2: float = _ARM.area_m2
+    """Load-carrying area A of the section (m^2), for E A and a G A."""
+    second_moment_m4: float = _ARM.second_moment_m4
+    """Second moment of area I of the section (m^4), for E I."""
+    polar_moment_m4: float = _ARM.polar_moment_m4
+    """Polar second moment J of the section (m^4), for G J."""
+    mass_kg: float = _ARM.mass_kg
+    """Total mass (kg), spread uniformly [paper: 183 g]."""
     youngs_modulus_pa: float = _ARM.youngs_modulus_pa
     """Young's modulus E (Pa)."""
     shear_modulus_pa: float = _ARM.shear_modulus_pa
@@ -94,9 +102,10 @@ class CosseratParams:
     """Translational damping constant c: v <- v exp(-c dt) (1/s) [paper: 800 / 8000]."""
     rotational_damping: float = 1e-4
     """Rotational damping constant c_rot: omega <- omega exp(-c_rot dt m_e / J) (1/s) [paper]."""
-    dt_s: float | None = None
-    """Timestep (s); None picks the largest that divides the 0.1 s control period and stays
-    below `cfl` times the stability limit."""
+    dt_s: float | None = constants.PAPER_TIMESTEP_S
+    """Timestep (s) [paper code: 2e-4 s, which also sets what its damper means]; None picks the
+    largest that divides the 0.1 s control period and stays below `cfl` times the stability
+    limit."""
     cfl: float = 0.7
     """Fraction of the explicit stability limit used when `dt_s` is None (-)."""
     settle_damping_per_s: float | None = None
@@ -118,12 +127,9 @@ class CosseratParams:
         return self.mass_kg / self.n_elements
 
     @property
-    def area_m2(self) -> float:
-        return math.pi * self.radius_m**2
-
-    @property
-    def second_moment_m4(self) -> float:
-        return math.pi * self.radius_m**4 / 4.0
+    def gyration_radius_m(self) -> float:
+        """sqrt(I / A) (m): an element's rotational inertia is its mass times this squared."""
+        return math.sqrt(self.second_moment_m4 / self.area_m2)
 
     @property
     def density_kg_m3(self) -> float:
@@ -155,11 +161,12 @@ class CosseratParams:
         """Upper estimate of the fastest element mode (rad/s).
 
         Axial (and bending) waves alternate between neighbours at 2 c / l with c = sqrt(E / rho);
-        an element's rotation against shear adds 4 a G / (rho r^2) to the square.
+        an element's rotation against shear adds a G / (rho g^2) to the square, g the radius of
+        gyration (4 a G / (rho r^2) for a solid disc).
         """
         rho, ell = self.density_kg_m3, self.element_length_m
         axial = 4.0 * self.youngs_modulus_pa / (rho * ell**2)
-        shear = 4.0 * self.shear_coefficient * self.shear_modulus_pa / (rho * self.radius_m**2)
+        shear = self.shear_coefficient * self.shear_modulus_pa / (rho * self.gyration_radius_m**2)
         return math.sqrt(axial + shear)
 
     @property
@@ -207,6 +214,24 @@ class CosseratParams:
         if domain not in DOMAIN_DAMPING_PER_S:
             raise ValueError(f"unknown domain {domain!r}; known: {sorted(DOMAIN_DAMPING_PER_S)}")
         return cls(damping_per_s=DOMAIN_DAMPING_PER_S[domain], **overrides)
+
+    @classmethod
+    def from_arm(cls, arm: ArmParams, domain: str = "source", **overrides) -> CosseratParams:
+        """The rod of `arm`'s geometry, section, mass and material in a paper domain."""
+        fields = dict(
+            length_m=arm.length_m,
+            area_m2=arm.area_m2,
+            second_moment_m4=arm.second_moment_m4,
+            polar_moment_m4=arm.polar_moment_m4,
+            mass_kg=arm.mass_kg,
+            youngs_modulus_pa=arm.youngs_modulus_pa,
+            shear_modulus_pa=arm.shear_modulus_pa,
+            chamber_length_m=arm.chamber_length_m,
+            chamber_offset_m=arm.chamber_offset_m,
+            chamber_area_m2=arm.chamber_area_m2,
+            gravity_mps2=arm.gravity_mps2,
+        )
+        return cls.for_domain(domain, **(fields | overrides))
 
 
 class RodState(NamedTuple):
@@ -262,9 +287,9 @@ def _make_rod(params: CosseratParams) -> _Rod:
     m_e = params.element_mass_kg
     node_mass = np.full(n + 1, m_e)
     node_mass[[0, -1]] = 0.5 * m_e
-    r2 = params.radius_m**2
-    inertia = np.tile(m_e * np.array([r2 / 4.0, r2 / 4.0, r2 / 2.0]), (n, 1))
-    g_j = params.shear_modulus_pa * 2.0 * params.second_moment_m4
+    per_mass = np.array([params.second_moment_m4, params.second_moment_m4, params.polar_moment_m4])
+    inertia = np.tile(m_e * per_mass / params.area_m2, (n, 1))
+    g_j = params.shear_modulus_pa * params.polar_moment_m4
     starts = np.arange(n) * ell
     elem_frac = _overlap(starts, starts + ell, params.chamber_length_m) / ell
     vor_lo = np.concatenate([[0.0], starts[1:] - 0.5 * ell])
@@ -494,7 +519,9 @@ def _settle_fn(params: CosseratParams):
     n_chunk = 100
     max_chunks = max(1, math.ceil(params.settle_max_s / (n_chunk * rod.dt)))
     return jax.jit(
-        functools.partial(_settle, rod, n_chunk, max_chunks, params.settle_tol_mps, params.radius_m)
+        functools.partial(
+            _settle, rod, n_chunk, max_chunks, params.settle_tol_mps, params.gyration_radius_m
+        )
     )
 
 

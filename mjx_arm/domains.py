@@ -12,7 +12,7 @@ import math
 import mujoco
 import numpy as np
 
-from mjx_arm.fitted import FIT
+from mjx_arm import constants, fitted
 
 #: Explicit (Euler) fluid drag is stable while timestep * drag rate stays below 2; keep a margin.
 DRAG_STEP_MARGIN = 0.5
@@ -35,8 +35,11 @@ class Domain:
     """Label stored with datasets and results."""
     viscosity: float | None = None
     """Medium viscosity (Pa s); None keeps the MJCF's `<option viscosity>`."""
-    viscosity_scale: float = 1.0
-    """Multiplies the viscosity (after `viscosity` is applied)."""
+    viscosity_scale: float | None = 1.0
+    """Multiplies the viscosity (after `viscosity` is applied). None: the model's own
+    constrained medium, the `<custom>` numeric `constrained_viscosity_scale` that
+    `python -m mjx_arm.fit` fitted for it (a model without one, such as the frozen
+    `models/softarm_solid.xml`, gets the solid arm's fitted scale)."""
     stiffness_scale: float = 1.0
     """Multiplies every joint stiffness (e.g. 0.7 for an aged, softer arm)."""
     mass_scale: float = 1.0
@@ -57,8 +60,8 @@ class Domain:
 
 
 SOURCE = Domain(name="source")
-CONSTRAINED = Domain(name="constrained", viscosity_scale=FIT["constrained_viscosity_scale"])
-AGED = Domain(name="aged", stiffness_scale=0.7, viscosity_scale=FIT["constrained_viscosity_scale"])
+CONSTRAINED = Domain(name="constrained", viscosity_scale=None)
+AGED = Domain(name="aged", stiffness_scale=0.7, viscosity_scale=None)
 DOMAINS = {d.name: d for d in (SOURCE, CONSTRAINED, AGED)}
 
 
@@ -70,6 +73,14 @@ def resolve(domain: str | Domain) -> Domain:
         return DOMAINS[domain]
     except KeyError:
         raise ValueError(f"unknown domain {domain!r}; built-in: {sorted(DOMAINS)}") from None
+
+
+def model_viscosity_scale(mj_model: mujoco.MjModel) -> float:
+    """The constrained medium's viscosity over the source's, as the model records it."""
+    for i in range(mj_model.nnumeric):
+        if mj_model.numeric(i).name == constants.CUSTOM_CONSTRAINED_SCALE:
+            return float(mj_model.numeric(i).data[0])
+    return fitted.load_fit(fitted.FIT_PATHS["solid"])["constrained_viscosity_scale"]
 
 
 def drag_rate_per_s(mj_model: mujoco.MjModel) -> float:
@@ -120,7 +131,9 @@ def apply(mj_model: mujoco.MjModel, domain: Domain) -> float:
     m = mj_model
     if domain.viscosity is not None:
         m.opt.viscosity = domain.viscosity
-    m.opt.viscosity *= domain.viscosity_scale
+    m.opt.viscosity *= (
+        model_viscosity_scale(m) if domain.viscosity_scale is None else (domain.viscosity_scale)
+    )
     if m.opt.viscosity <= 0 and m.opt.density <= 0:
         raise ValueError("the domain's medium has zero viscosity and density: MJX drops fluid code")
     m.jnt_stiffness[:] *= domain.stiffness_scale

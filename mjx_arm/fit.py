@@ -8,19 +8,25 @@ with finite differences, each residual a MuJoCo C rollout of the generated model
   * `medium_drag_ns_per_m2`: the source medium's drag per unit length (sets the viscosity);
   * `constrained_viscosity_scale`: the constrained medium's viscosity over the source's.
 
-The data are tip poses of the rod (`mjx_arm.cosserat`, the paper's density and per-mass damping
-800 / 8000 1/s) under seeded babbling programs that `python -m mjx_arm.fidelity` never uses
-(seeds `FIT_SEEDS`; fidelity tests on seeds 0-2). Residuals are tip position errors (m) and d3
-errors times the arm length, both domains together, over every 10 Hz sample. Stiffness, gain
-and drag can trade off almost freely in an overdamped arm (scaling all three changes nothing but
-the weight of inertia), so a prior keeps stiffness and gain near their physical values and the
-data set their ratios to the drag. With a much weaker prior the fit lowers all three together,
-standing in for the rod's heavier mass, for almost no gain in fit.
+The data are tip poses of the rod (`mjx_arm.cosserat` with the arm's section and mass, the paper
+code's per-mass damping 800 / 8000 1/s and its 2e-4 s step) under seeded babbling programs that
+`python -m mjx_arm.fidelity` never uses (seeds `FIT_SEEDS`; fidelity tests on seeds 0-2), with
+holds of up to 30 s so the constrained medium's slow settling weighs in. Residuals are tip
+position errors (m) and d3 errors times the arm length, both domains together, over every 10 Hz
+sample.
+
+Stiffness, gain and drag can trade off almost freely in an overdamped arm (scaling all three
+changes nothing but the weight of inertia), and the chain's statics already follow from the
+section with no fitting (chamber couples and springs are exact per joint), so a strong prior
+holds stiffness and gain at their physical values and the data fit the two media. With a weak
+prior the fit lowers stiffness and gain by 15% with a 2.4% different ratio, which trades the
+statics and the constrained medium's slow settling for a little babbling error.
 
 The joints carry no damping: the rod has no material damping, only the medium's.
 
-Run `python -m mjx_arm.fit`; it writes `models/softarm_fit.json` and regenerates
-`models/softarm.xml` from it (`--no-write` only prints).
+Run `python -m mjx_arm.fit --out FIT.json` to fit and write the result; add `--write-model` to
+make it the committed fit: `models/softarm_fit.json` and `models/softarm.xml` regenerated from
+it, the two written together.
 """
 
 from __future__ import annotations
@@ -38,30 +44,24 @@ import mujoco.minimize
 import numpy as np
 
 import mjx_arm
-from mjx_arm import constants, cosserat, domains
+from mjx_arm import constants, cosserat, domains, fitted
 from mjx_arm.arm import SimulationDivergedError
 from mjx_arm.fidelity import babble_program
-from mjx_arm.fitted import FIT_PATH, UNFITTED
 from mjx_arm.machine import cpu_model
 from mjx_arm.model_gen import ArmParams, generate_xml
 
 #: Babbling seeds of the fit data (the fidelity report holds out seeds 0-2).
 FIT_SEEDS = (100, 101, 102)
 #: Seconds of babbling per seed and domain.
-FIT_SECONDS = 60.0
-#: Each random target is held 0.5-10 s (control periods), longer than the fidelity protocol's
+FIT_SECONDS = 120.0
+#: Each random target is held 0.5-30 s (control periods), longer than the fidelity protocol's
 #: 0.5-3 s, so the slow settling of the constrained medium weighs in the fit.
-FIT_HOLD_PERIODS = (5, 100)
+FIT_HOLD_PERIODS = (5, 300)
 FIT_DOMAINS = ("source", "constrained")
 #: Fitted names in the order of the parameter vector (log values).
-NAMES = (
-    "stiffness_scale",
-    "chamber_gain_scale",
-    "medium_drag_ns_per_m2",
-    "constrained_viscosity_scale",
-)
+NAMES = fitted.FIT_NAMES
 #: Weight (m per unit of log) of the prior pulling stiffness and gain toward 1.
-PRIOR_WEIGHT_M = 1e-3
+PRIOR_WEIGHT_M = 0.3
 #: Log-space box: each factor stays within 1/8 .. 8 times its starting value.
 LOG_BOUND = math.log(8.0)
 #: Finite-difference step in log space (the MJCF keeps 6 significant digits, so ~1e-6 is noise).
@@ -77,6 +77,11 @@ def params_from_log(x: np.ndarray, base: ArmParams = ArmParams()) -> ArmParams:
     )
 
 
+def unfitted_values(base: ArmParams = ArmParams()) -> dict[str, float]:
+    """The physical values, nothing fitted: the fit's start and its prior's centre."""
+    return fitted.unfitted(base.mass_kg / base.length_m)
+
+
 def domain_of(params: ArmParams, name: str) -> domains.Domain:
     """The fit domain `name` for `params` (the constrained one at its viscosity scale)."""
     if name == "source":
@@ -85,8 +90,9 @@ def domain_of(params: ArmParams, name: str) -> domains.Domain:
 
 
 def initial_log() -> np.ndarray:
-    """Starting point: the physical values, nothing fitted (`model_gen.UNFITTED`)."""
-    return np.log([UNFITTED[name] for name in NAMES])
+    """Starting point: the physical values, nothing fitted (`unfitted_values`)."""
+    start = unfitted_values()
+    return np.log([start[name] for name in NAMES])
 
 
 def reference_data(seeds=FIT_SEEDS, seconds: float = FIT_SECONDS) -> dict[str, dict]:
@@ -94,7 +100,7 @@ def reference_data(seeds=FIT_SEEDS, seconds: float = FIT_SECONDS) -> dict[str, d
     programs = np.stack([babble_program(s, seconds, FIT_HOLD_PERIODS) for s in seeds])
     out = {}
     for domain in FIT_DOMAINS:
-        params = cosserat.CosseratParams.for_domain(domain)
+        params = cosserat.CosseratParams.from_arm(ArmParams(), domain)
         out[domain] = {"programs": programs, "poses": cosserat.rollout(programs, params)}
     return out
 
@@ -185,13 +191,15 @@ def fit(data: dict[str, dict], max_iter: int = 30, log=print) -> dict:
         "evaluations": evaluations,
         "iterations": len(trace),
         "fitted": dict(zip(NAMES, np.exp(x).tolist(), strict=True)),
-        "initial": {name: UNFITTED[name] for name in NAMES},
+        "initial": unfitted_values(),
         "final_cost": float(trace[-1].objective) if trace else float("nan"),
         "fit_data": {
             "seeds": list(FIT_SEEDS),
             "seconds": FIT_SECONDS,
             "hold_periods": list(FIT_HOLD_PERIODS),
-            "reference": "mjx_arm.cosserat: 20 elements, 1104 kg/m^3, damping 800 / 8000 1/s",
+            "reference": "mjx_arm.cosserat: 20 elements, the arm's section and mass, damping"
+            " 800 / 8000 1/s at 2e-4 s",
+            "section": ArmParams().section,
         },
         "fit_error_before": before,
         "fit_error_after": after,
@@ -199,13 +207,48 @@ def fit(data: dict[str, dict], max_iter: int = 30, log=print) -> dict:
     }
 
 
+def write_committed_fit(result: dict) -> None:
+    """Makes `result` the committed fit: `models/softarm_fit.json` and the regenerated
+    `models/softarm.xml`, both first written beside their targets, then renamed into place, so
+    a failure leaves the old pair intact."""
+    fit_path = fitted.FIT_PATHS[ArmParams().section]
+    params = dataclasses.replace(ArmParams(), **result["fitted"])
+    staged = [
+        (fit_path, json.dumps(result, indent=2) + "\n"),
+        (constants.DEFAULT_MODEL_PATH, generate_xml(params)),
+    ]
+    for path, text in staged:
+        path.with_name(path.name + ".tmp").write_text(text)
+    for path, _ in staged:
+        path.with_name(path.name + ".tmp").replace(path)
+        print(f"wrote {path}")
+
+
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--max-iter", type=int, default=30)
-    parser.add_argument("--out", type=Path, default=FIT_PATH)
-    parser.add_argument("--no-write", action="store_true", help="print the fit, write nothing")
+    parser = argparse.ArgumentParser(
+        prog="python -m mjx_arm.fit",
+        description=__doc__.splitlines()[0]
+        + ". Writes only --out, unless --write-model makes the fit the committed one.",
+        formatter_class=argparse.ArgumentDefaultsHelpFormatter,
+    )
+    parser.add_argument(
+        "--max-iter", type=int, default=30, help="Levenberg-Marquardt iterations at most"
+    )
+    parser.add_argument("--out", type=Path, help="write the fit result (JSON) here")
+    parser.add_argument(
+        "--write-model",
+        action="store_true",
+        help="rewrite the committed models/softarm_fit.json and models/softarm.xml from the fit",
+    )
     args = parser.parse_args(argv)
+    if args.max_iter < 1:
+        parser.error("--max-iter must be >= 1")
+    if args.out is None and not args.write_model:
+        parser.error("say where the fit goes: --out FILE, --write-model, or both")
+    if args.out is not None and (args.out.is_dir() or not args.out.parent.is_dir()):
+        parser.error(f"--out {args.out} must be a file path in an existing folder")
     t0 = time.perf_counter()
+    print("reference rod data ...", flush=True)
     data = reference_data()
     seconds = time.perf_counter() - t0
     print(f"reference rod data: {len(FIT_SEEDS)} x {FIT_SECONDS:g} s per domain in {seconds:.1f} s")
@@ -218,15 +261,13 @@ def main(argv: list[str] | None = None) -> int:
             f"{domain:12s} tip RMS {1e3 * b['tip_rms_m']:.2f} -> {1e3 * a['tip_rms_m']:.2f} mm,"
             f" d3 {1e3 * b['d3_mean_rad']:.1f} -> {1e3 * a['d3_mean_rad']:.1f} mrad"
         )
-    if args.no_write:
-        return 0
-    tmp = args.out.with_suffix(".json.tmp")
-    tmp.write_text(json.dumps(result, indent=2) + "\n")
-    tmp.replace(args.out)
-    print(f"wrote {args.out}")
-    params = dataclasses.replace(ArmParams(), **result["fitted"])
-    constants.DEFAULT_MODEL_PATH.write_text(generate_xml(params))
-    print(f"wrote {constants.DEFAULT_MODEL_PATH}")
+    if args.out is not None:
+        tmp = args.out.with_name(args.out.name + ".tmp")
+        tmp.write_text(json.dumps(result, indent=2) + "\n")
+        tmp.replace(args.out)
+        print(f"wrote {args.out}")
+    if args.write_model:
+        write_committed_fit(result)
     return 0
 
 

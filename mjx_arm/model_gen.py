@@ -23,8 +23,8 @@ import math
 import sys
 from pathlib import Path
 
-from mjx_arm import constants
-from mjx_arm.fitted import FIT
+from mjx_arm import constants, fitted
+from mjx_arm import section as sections
 
 
 @dataclasses.dataclass(frozen=True)
@@ -37,12 +37,19 @@ class ArmParams:
     modelling choice explained inline.
     """
 
+    section: str = "isupport"
+    """What carries bending, twist and stretch (`mjx_arm.section`): "isupport", the three
+    chamber tubes [SoRoMoX's I-Support model], or "solid", a solid disc of `radius_m` (the
+    earlier, 15x stiffer model, kept as a comparison). The fitted factors below default to the
+    section's own fit; `dataclasses.replace` keeps them, so build a new `ArmParams(section=...)`
+    to change section."""
     length_m: float = 0.2
     """Arm length (m) [paper: ~0.202 m; code: 0.19 m]."""
     radius_m: float = 0.03
-    """Cross-section radius (m) [paper, code]."""
+    """Outer radius of the arm (m) [paper, code]: the solid section's radius and the capsules'
+    drawn size."""
     mass_kg: float = 0.183
-    """Total mass (kg) [paper: 183 g]."""
+    """Total mass (kg) [paper: 183 g], spread evenly along the length."""
     youngs_modulus_pa: float = 1.646439e6
     """Young's modulus E (Pa) [code]."""
     poisson_ratio: float = 0.5
@@ -62,17 +69,21 @@ class ArmParams:
     timestep_s: float = 0.004
     """Physics timestep (s) [choice: bench/timestep.py measures speed and error against 0.5 ms;
     stability at this step comes from `Domain.inertia_scale`]."""
-    medium_drag_ns_per_m2: float = FIT["medium_drag_ns_per_m2"]
+    medium_drag_ns_per_m2: float | None = None
     """Viscous drag of the source domain's medium on the arm, force per unit length per unit
-    speed (N s/m^2) [fit; for comparison, the reference's 800 1/s on its 1104 kg/m^3 rod is
-    2497 N s/m^2]. The MJCF's viscosity is derived from it per segment count."""
-    stiffness_scale: float = FIT["stiffness_scale"]
-    """Multiplies the bend, twist and stretch stiffness derived from E and G [fit]."""
-    chamber_gain_scale: float = FIT["chamber_gain_scale"]
-    """Multiplies the chamber force per bar, pressure x lumen area [fit]."""
-    constrained_viscosity_scale: float = FIT["constrained_viscosity_scale"]
+    speed (N s/m^2) [fit; the paper code's damper at 800 1/s and 2e-4 s is a drag of 867.6 1/s
+    per unit mass, 794 N s/m^2 on 0.915 kg/m]. The MJCF's viscosity is derived from it per
+    segment count. None: the section's fit."""
+    stiffness_scale: float | None = None
+    """Multiplies the bend, twist and stretch stiffness derived from E and G [fit]. None: the
+    section's fit."""
+    chamber_gain_scale: float | None = None
+    """Multiplies the chamber force per bar, pressure x lumen area [fit]. None: the section's
+    fit."""
+    constrained_viscosity_scale: float | None = None
     """Viscosity of the constrained medium over the source's [fit to the reference's 8000 vs
-    800 1/s]. Recorded in the MJCF header; `mjx_arm.domains.CONSTRAINED` applies it."""
+    800 1/s at the paper's 2e-4 s step]. Written into the MJCF's `<custom>`, where
+    `mjx_arm.domains.CONSTRAINED` reads it. None: the section's fit."""
     bend_armature_scale: float = 4.0
     """Joint armature of each ball joint, as a multiple of the segment's own rotational inertia
     about its top [choice: slows only the segment-local modes so explicit drag stays stable at
@@ -85,13 +96,37 @@ class ArmParams:
     pass, an extra factorisation of the mass matrix every step, is switched off with
     `<flag eulerdamp="disable"/>`]."""
 
+    def __post_init__(self):
+        if self.section not in sections.SECTIONS:
+            raise ValueError(f"unknown section {self.section!r}; known: {sections.SECTIONS}")
+        missing = [n for n in fitted.FIT_NAMES if getattr(self, n) is None]
+        if missing:
+            stored = fitted.load_fit(fitted.FIT_PATHS[self.section])
+            values = stored or fitted.unfitted(self.mass_kg / self.length_m)
+            for name in missing:
+                object.__setattr__(self, name, values[name])
+
+    @property
+    def cross_section(self) -> sections.Section:
+        """Area, second moment and polar moment of the load-carrying section."""
+        return sections.section(
+            self.section,
+            self.radius_m,
+            self.chamber_outer_radius_m,
+            self.chamber_wall_m,
+            self.chamber_offset_m,
+        )
+
     @property
     def drag_diameter_m(self) -> float:
         """Mean side of a segment's inertia box, the diameter in MuJoCo's Stokes drag.
 
-        A solid cylinder's inertia box has sides sqrt(3) r, sqrt(3) r and l.
+        A body whose inertia is the segment's (`segment_inertia_kgm2`) has a box of sides
+        2 sqrt(3) g, 2 sqrt(3) g and l, g the section's radius of gyration (sqrt(3) r for a
+        solid disc).
         """
-        return (2.0 * math.sqrt(3.0) * self.radius_m + self.segment_length_m) / 3.0
+        side = 2.0 * math.sqrt(3.0) * self.cross_section.gyration_radius_m
+        return (2.0 * side + self.segment_length_m) / 3.0
 
     @property
     def viscosity_pa_s(self) -> float:
@@ -117,11 +152,15 @@ class ArmParams:
 
     @property
     def area_m2(self) -> float:
-        return math.pi * self.radius_m**2
+        return self.cross_section.area_m2
 
     @property
     def second_moment_m4(self) -> float:
-        return math.pi * self.radius_m**4 / 4.0
+        return self.cross_section.second_moment_m4
+
+    @property
+    def polar_moment_m4(self) -> float:
+        return self.cross_section.polar_moment_m4
 
     @property
     def bend_stiffness_nm_per_rad(self) -> float:
@@ -131,8 +170,8 @@ class ArmParams:
 
     @property
     def twist_stiffness_nm_per_rad(self) -> float:
-        """s G J / l with J = 2 I."""
-        g_j = self.shear_modulus_pa * 2.0 * self.second_moment_m4
+        """s G J / l."""
+        g_j = self.shear_modulus_pa * self.polar_moment_m4
         return self.stiffness_scale * g_j / self.segment_length_m
 
     @property
@@ -153,10 +192,11 @@ class ArmParams:
 
     @property
     def segment_inertia_kgm2(self) -> tuple[float, float, float]:
-        """Solid-cylinder inertia of one segment about its centre of mass (x, y, z)."""
-        m, r, l = self.segment_mass_kg, self.radius_m, self.segment_length_m
-        transverse = m * (3.0 * r**2 + l**2) / 12.0
-        return (transverse, transverse, m * r**2 / 2.0)
+        """Inertia of one segment about its centre of mass (x, y, z), its mass spread like the
+        section's area: m (I / A + l^2 / 12) across, m J / A about the axis."""
+        m, l, sec = self.segment_mass_kg, self.segment_length_m, self.cross_section
+        transverse = m * (sec.second_moment_m4 / sec.area_m2 + l**2 / 12.0)
+        return (transverse, transverse, m * sec.polar_moment_m4 / sec.area_m2)
 
     @property
     def bend_armature_kgm2(self) -> float:
@@ -188,6 +228,14 @@ class ArmParams:
         for name in positive + fitted:
             if getattr(self, name) <= 0.0:
                 raise ValueError(f"{name} must be > 0 (a zero viscosity drops MJX's fluid code)")
+
+
+#: How the MJCF header describes each section.
+SECTION_TEXT = {
+    "isupport": "the three chamber tubes carry the loads [SoRoMoX],\n"
+    "    joined by their caps: A = 3 A_t, I = 3 pi/4 (r_o^4 - r_i^4) + 3/2 A_t d^2, J = 2 I;",
+    "solid": "a solid disc of the arm's radius: A = pi r^2, I = pi r^4 / 4, J = 2 I;",
+}
 
 
 def _f(x: float) -> str:
@@ -236,6 +284,8 @@ def generate_xml(params: ArmParams = ArmParams()) -> str:
     inertia = p.segment_inertia_kgm2
     offsets = chamber_offsets_m(p)
     weights = chamber_span_weights(p)
+    sec = p.cross_section
+    section_text = SECTION_TEXT[p.section]
 
     header = f"""<!--
   Soft pneumatic arm (I-Support module) as a chain of {p.n_segments} rigid segments.
@@ -248,14 +298,17 @@ def generate_xml(params: ArmParams = ArmParams()) -> str:
     mass {_f(p.mass_kg)} kg [paper 183 g], E {_f(p.youngs_modulus_pa)} Pa [code],
     Poisson {_f(p.poisson_ratio)} so G = {_f(p.shear_modulus_pa)} Pa [code],
     gravity {_f(p.gravity_mps2)} m/s^2 [code].
-  Per segment (l = {_f(seg)} m, m = {_f(p.segment_mass_kg)} kg, solid-cylinder inertia),
+  Section "{p.section}" (mjx_arm.section): {section_text}
+    A = {_f(sec.area_m2)} m^2, I = {_f(sec.second_moment_m4)} m^4,
+    J = {_f(sec.polar_moment_m4)} m^4.
+  Per segment (l = {_f(seg)} m, m = {_f(p.segment_mass_kg)} kg spread like the section's area),
   stiffness scaled by {_f(p.stiffness_scale)} [fit]:
-    bending hinges (x, y) s*E*I/l = {_f(p.bend_stiffness_nm_per_rad)} N m/rad (I = pi r^4/4),
-    twist hinge (z) s*G*J/l = {_f(p.twist_stiffness_nm_per_rad)} N m/rad (J = 2 I);
+    bending hinges (x, y) s*E*I/l = {_f(p.bend_stiffness_nm_per_rad)} N m/rad,
+    twist hinge (z) s*G*J/l = {_f(p.twist_stiffness_nm_per_rad)} N m/rad;
       the base joints stand for the half segment at the clamp, so twice these: this places each
       joint's compliance at the centroid of the rod it lumps and makes the tip deflection under
       a uniform moment exact for any segment count [choice];
-    slide-joint stiffness s*E*A/l = {_f(p.stretch_stiffness_n_per_m)} N/m (A = pi r^2);
+    slide-joint stiffness s*E*A/l = {_f(p.stretch_stiffness_n_per_m)} N/m;
     armature: hinges {_f(p.bend_armature_kgm2)} kg m^2, slide {_f(p.stretch_armature_kg)} kg
       [choice, see ArmParams]; no joint damping: the medium damps the arm.
   Chambers: 3 fixed tendons, {_f(p.chamber_offset_m)} m off the axis at 0/120/240 deg
@@ -289,6 +342,10 @@ def generate_xml(params: ArmParams = ArmParams()) -> str:
     lines.append("  <custom>")
     for name, value in constants.CUSTOM_VALVE_FIELDS.items():
         lines.append(f'    <numeric name="{name}" data="{_f(value)}"/>')
+    lines.append(
+        f'    <numeric name="{constants.CUSTOM_CONSTRAINED_SCALE}"'
+        f' data="{_f(p.constrained_viscosity_scale)}"/>'
+    )
     lines.append("  </custom>")
     lines.append("  <visual>")
     lines.append('    <global offwidth="1280" offheight="720"/>')

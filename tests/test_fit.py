@@ -29,17 +29,57 @@ def test_fit_recovers_the_media_of_a_known_arm():
 
 
 def test_committed_fit_drives_the_defaults():
-    stored = fitted.load_fit()
-    from mjx_arm import CONSTRAINED, ArmParams
+    import mjx_arm
+    from mjx_arm import ArmParams
 
+    stored = fitted.load_fit()
     assert ArmParams().stiffness_scale == stored["stiffness_scale"]
     assert ArmParams().medium_drag_ns_per_m2 == stored["medium_drag_ns_per_m2"]
-    assert CONSTRAINED.viscosity_scale == stored["constrained_viscosity_scale"]
+    # The constrained medium travels in the model and is applied on load.
+    source, constrained = mjx_arm.load(), mjx_arm.load(domain="constrained")
+    ratio = constrained.mj_model.opt.viscosity / source.mj_model.opt.viscosity
+    assert ratio == pytest.approx(stored["constrained_viscosity_scale"], rel=1e-5)
+    # The frozen solid arm has no such field and keeps its own fitted scale.
+    solid = fitted.load_fit(fitted.FIT_PATHS["solid"])
+    s_src = mjx_arm.load(mjx_arm.constants.SOLID_MODEL_PATH)
+    s_con = mjx_arm.load(mjx_arm.constants.SOLID_MODEL_PATH, domain="constrained")
+    ratio = s_con.mj_model.opt.viscosity / s_src.mj_model.opt.viscosity
+    assert ratio == pytest.approx(solid["constrained_viscosity_scale"], rel=1e-9)
+
+
+def test_the_unfitted_media_are_the_paper_dampers_as_linear_drags():
+    # v <- v exp(-c dt) at dt = 2e-4 s: (e^0.16 - 1) / 2e-4 = 867.6 1/s and
+    # (e^1.6 - 1) / 2e-4 = 19,765 1/s, so the paper's "10x" medium is 22.8x the source's drag.
+    start = fitted.unfitted(0.915)
+    assert fitted.damper_drag_rate_per_s(800.0) == pytest.approx(867.55, rel=1e-4)
+    assert fitted.damper_drag_rate_per_s(8000.0) == pytest.approx(19765.2, rel=1e-4)
+    assert start["constrained_viscosity_scale"] == pytest.approx(22.78, rel=1e-3)
+    assert start["medium_drag_ns_per_m2"] == pytest.approx(867.55 * 0.915, rel=1e-4)
+    # At the rod's earlier 176.7 us step the same constants gave 20.5x: the ratio depends on dt.
+    ratio_177us = fitted.damper_drag_rate_per_s(8000.0, 176.7e-6) / (
+        fitted.damper_drag_rate_per_s(800.0, 176.7e-6)
+    )
+    assert ratio_177us == pytest.approx(20.5, abs=0.05)
+
+
+def test_fit_cli_writes_only_what_it_is_told(tmp_path, capsys):
+    from mjx_arm import constants
+
+    with pytest.raises(SystemExit) as err:
+        fit.main([])  # no --out and no --write-model: a usage error before any work
+    assert err.value.code == 2
+    assert "--write-model" in capsys.readouterr().err
+    with pytest.raises(SystemExit):
+        fit.main(["--out", str(tmp_path / "missing" / "fit.json")])
+    with pytest.raises(SystemExit):
+        fit.main(["--out", str(tmp_path), "--max-iter", "1"])
+    model = constants.DEFAULT_MODEL_PATH.read_bytes()
+    assert constants.DEFAULT_MODEL_PATH.read_bytes() == model
 
 
 def test_a_corrupt_fit_file_is_refused_and_a_missing_one_means_unfitted(tmp_path):
     path = tmp_path / "fit.json"
-    assert fitted.load_fit(path) == fitted.UNFITTED
+    assert fitted.load_fit(path) is None
     path.write_text(json.dumps({"fitted": {"stiffness_scale": 1.0}}))
     with pytest.raises(ValueError, match="not a fit result"):
         fitted.load_fit(path)

@@ -17,6 +17,29 @@ def test_committed_model_equals_generator_output():
     )
 
 
+def test_the_solid_section_regenerates_the_frozen_solid_arm():
+    # models/softarm_solid.xml is kept byte for byte for the data made with it; the generator's
+    # solid section must still produce its physics.
+    frozen = mujoco.MjModel.from_xml_path(str(constants.SOLID_MODEL_PATH))
+    regenerated = mujoco.MjModel.from_xml_string(generate_xml(ArmParams(section="solid")))
+    for field in ("jnt_stiffness", "dof_armature", "body_mass", "body_inertia", "wrap_prm"):
+        np.testing.assert_allclose(getattr(regenerated, field), getattr(frozen, field), rtol=1e-6)
+    np.testing.assert_allclose(regenerated.actuator_gainprm, frozen.actuator_gainprm, rtol=1e-6)
+    assert regenerated.opt.viscosity == pytest.approx(frozen.opt.viscosity, rel=1e-6)
+
+
+def test_the_isupport_section_is_15_times_softer_than_the_solid_disc():
+    tubes, disc = ArmParams(), ArmParams(section="solid")
+    # SoRoMoX's I-Support numbers: I = 3 pi/4 (r_o^4 - r_i^4) + 3/2 A_t d^2 = 4.22e-8 m^4.
+    assert tubes.second_moment_m4 == pytest.approx(4.217e-8, rel=1e-3)
+    assert disc.second_moment_m4 / tubes.second_moment_m4 == pytest.approx(15.09, rel=1e-3)
+    assert tubes.area_m2 == pytest.approx(3 * np.pi * (0.00779**2 - 0.00639**2), rel=1e-9)
+    assert tubes.polar_moment_m4 == pytest.approx(2 * tubes.second_moment_m4)
+    assert tubes.mass_kg == disc.mass_kg == 0.183
+    with pytest.raises(ValueError, match="unknown section"):
+        ArmParams(section="hollow")
+
+
 @pytest.mark.parametrize("n_segments", [3, 5, 10, 20])
 def test_segment_counts_compile_with_chamber_ending_at_its_length(n_segments):
     params = dataclasses.replace(ArmParams(), n_segments=n_segments)
