@@ -57,6 +57,7 @@ import numpy as np
 from tqdm import tqdm
 
 import mjx_arm  # (before jax: sets the XLA CPU flag)
+from ccgan.train import ConfigError, HelpFormatter, check_fields
 from eval import metrics, mpc, shapes
 from mjx_arm import constants
 
@@ -85,54 +86,56 @@ SOLID_ARM_NOTE = (
 )
 
 
-class ConfigError(ValueError):
-    """A setting of EvalConfig or OracleConfig that no run can use; `field` names it (the CLI
-    turns it into a usage error naming the flag)."""
-
-    def __init__(self, field: str, reason: str):
-        super().__init__(f"{field}: {reason}")
-        self.field = field
-        self.reason = reason
-
-
 class TranslatorError(ValueError):
     """A translator checkpoint that was asked for (a path, or $CCGAN_TRANSLATOR) is missing or
     does not load; the run stops before any work instead of skipping the method."""
 
 
-def _require(ok: bool, field: str, reason: str) -> None:
+def _require(ok: bool, field: str, problem: str) -> None:
+    """ConfigError(field, problem) unless ok; `problem` follows the field's name."""
     if not ok:
-        raise ConfigError(field, reason)
+        raise ConfigError(field, problem)
 
 
-def _is_int(value) -> bool:
-    return isinstance(value, int | np.integer) and not isinstance(value, bool)
+def _check_ints(field: str, values, lowest: int) -> None:
+    """A tuple of distinct integers >= lowest, or one integer >= lowest."""
+    many = isinstance(values, tuple | list)
+    items = values if many else (values,)
+    _require(
+        len(items) > 0
+        and all(isinstance(v, int | np.integer) and not isinstance(v, bool) for v in items)
+        and all(v >= lowest for v in items)
+        and len(set(items)) == len(items),
+        field,
+        f"must be {'distinct integers' if many else 'an integer'} >= {lowest}, got {values!r}",
+    )
 
 
 def _check_duration(field: str, value) -> None:
-    """A program length (s) that gives at least one 0.1 s command (`shapes.times_s`)."""
+    """A program length (s) that gives at least one command (`shapes.times_s`)."""
     _require(
         isinstance(value, int | float)
         and math.isfinite(value)
         and round(value * shapes.CONTROL_HZ) >= 1,
         field,
-        f"must be a length in seconds of at least one {1 / shapes.CONTROL_HZ:g} s command,"
-        f" got {value!r}",
+        f"must be a length (s) of at least one {1 / shapes.CONTROL_HZ:g} s command, got {value!r}",
     )
 
 
 def _check_names(field: str, values, known) -> None:
     """A non-empty tuple of distinct names, each one of `known`."""
-    _require(len(values) > 0, field, "needs at least one")
     unknown = [v for v in values if v not in known]
-    _require(not unknown, field, f"unknown {unknown}; known: {list(known)}")
-    _require(len(set(values)) == len(values), field, f"repeats a name: {list(values)}")
+    _require(
+        len(values) > 0 and not unknown and len(set(values)) == len(values),
+        field,
+        f"must name distinct ones of {list(known)}, got {list(values)}",
+    )
 
 
 def _check_file(field: str, path) -> None:
     """An explicitly given input file (a translator checkpoint, an MJCF) that exists."""
     if path is not None:
-        _require(Path(path).is_file(), field, f"no such file: {path}")
+        _require(Path(path).is_file(), field, f"names no file: {path}")
 
 
 @dataclasses.dataclass(frozen=True)
@@ -156,30 +159,22 @@ class OracleConfig:
     "stretch" (the stretch program)."""
 
     def __post_init__(self):
-        """Refuses settings that would fail (or mean nothing) after minutes of work."""
+        """Refuses settings that would fail (or mean nothing) after minutes of work; fields are
+        named "oracle.<field>" in the ConfigError."""
         _require(
             self.init in ("mpc", "stretch"),
             "oracle.init",
-            f"oracle init must be 'mpc' or 'stretch', got {self.init!r}",
+            f"must be 'mpc' or 'stretch', got {self.init!r}",
         )
-        _require(
-            _is_int(self.steps) and self.steps >= 1,
-            "oracle.steps",
-            f"needs at least one Adam step, got {self.steps!r}",
-        )
-        _require(
-            math.isfinite(self.learning_rate) and self.learning_rate > 0,
-            "oracle.learning_rate",
-            f"must be finite and > 0, got {self.learning_rate!r}",
-        )
+        _check_ints("oracle.steps", self.steps, 1)
         if self.horizon_s is not None:
             _check_duration("oracle.horizon_s", self.horizon_s)
-        w = self.orientation_weight_cm_per_rad
-        _require(
-            math.isfinite(w) and w >= 0,
-            "oracle.orientation_weight_cm_per_rad",
-            f"must be finite and >= 0, got {w!r}",
-        )
+        try:
+            check_fields(
+                self, above={"learning_rate": 0}, at_least={"orientation_weight_cm_per_rad": 0}
+            )
+        except ConfigError as err:
+            raise ConfigError(f"oracle.{err.field}", err.problem) from None
 
 
 @dataclasses.dataclass(frozen=True)
@@ -244,36 +239,22 @@ class EvalConfig:
 
         _check_names("shapes", self.shapes, shapes.SHAPES)
         _check_names("methods", self.methods, METHODS)
-        _require(len(self.seeds) > 0, "seeds", "needs at least one seed")
-        _require(
-            all(_is_int(s) and s >= 0 for s in self.seeds)
-            and len(set(self.seeds)) == len(self.seeds),
-            "seeds",
-            f"must be distinct integers >= 0, got {list(self.seeds)}",
-        )
+        _check_ints("seeds", self.seeds, 0)  # numpy seeds are >= 0
         _check_duration("duration_s", self.duration_s)
         _check_duration("validation_duration_s", self.validation_duration_s)
-        _require(self.backend in ("c", "mjx"), "backend", f"'c' or 'mjx', got {self.backend!r}")
-        k = self.stretch_candidates
         _require(
-            len(k) > 0 and all(_is_int(v) and v >= 1 for v in k) and len(set(k)) == len(k),
-            "stretch_candidates",
-            f"needs distinct integers k >= 1 (control periods per source step), got {list(k)}",
+            self.backend in ("c", "mjx"), "backend", f"must be 'c' or 'mjx', got {self.backend!r}"
         )
-        _require(
-            all(math.isfinite(s) and s >= 0 for s in self.noise_stds),
-            "noise_stds",
-            f"must be finite and >= 0, got {list(self.noise_stds)}",
-        )
-        _require(
-            _is_int(self.n_repeats) and self.n_repeats >= 1,
-            "n_repeats",
-            f"needs at least one repetition, got {self.n_repeats!r}",
-        )
+        _check_ints("stretch_candidates", self.stretch_candidates, 1)  # control periods per step
+        _check_ints("n_repeats", self.n_repeats, 1)
+        _check_ints("video_fps", self.video_fps, 1)
+        _require(len(self.video_panel_hw) == 2, "video_panel_hw", "must be (height, width)")
+        _check_ints("video_panel_hw", tuple(self.video_panel_hw), 1)
+        check_fields(self, at_least={"noise_stds": 0}, above={"video_speedup": 0})
         _require(
             self.out_dir is None or not Path(self.out_dir).is_file(),
             "out_dir",
-            f"{self.out_dir} is a file, not a folder",
+            f"names a file, not a folder: {self.out_dir}",
         )
         if self.xml is None:
             _check_file("model_path", self.model_path)
@@ -281,27 +262,11 @@ class EvalConfig:
         _require(
             self.target_domain in targets,
             "target_domain",
-            f"one of {targets}, got {self.target_domain!r}",
+            f"must be one of {targets}, got {self.target_domain!r}",
         )
         for field in ("ccgan_path", "wcgan_path", "ccgan_sim_path"):
             _check_file(field, getattr(self, field))
         _require(isinstance(self.oracle, OracleConfig), "oracle", "must be an OracleConfig")
-        _require(
-            _is_int(self.video_fps) and self.video_fps >= 1,
-            "video_fps",
-            f"must be an integer >= 1, got {self.video_fps!r}",
-        )
-        _require(
-            math.isfinite(self.video_speedup) and self.video_speedup > 0,
-            "video_speedup",
-            f"must be finite and > 0, got {self.video_speedup!r}",
-        )
-        _require(
-            len(self.video_panel_hw) == 2
-            and all(_is_int(v) and v >= 1 for v in self.video_panel_hw),
-            "video_panel_hw",
-            f"needs (height, width) pixels >= 1, got {self.video_panel_hw!r}",
-        )
 
 
 def quick(cfg: EvalConfig) -> EvalConfig:
@@ -346,7 +311,7 @@ def translator_source(method: str, cfg: EvalConfig) -> tuple[Path, bool]:
     if method == "ccgan":
         from ccgan.translator import translator_path
 
-        asked = cfg.ccgan_path is not None or os.environ.get("CCGAN_TRANSLATOR") is not None
+        asked = cfg.ccgan_path is not None or bool(os.environ.get("CCGAN_TRANSLATOR"))
         return translator_path(cfg.ccgan_path), asked
     given, default = {
         "ccgan_sim": (cfg.ccgan_sim_path, CCGAN_SIM_DEFAULT_PATH),
@@ -517,13 +482,22 @@ class Translator:
     """A loaded translator method: `translate(p_s [T, 3], poses_s [T, 6], seed)`.
 
     With `trained_seeds` ({seed: translator}, several independently trained models) the seed
-    picks the model, so a method's mean ± std spans training seeds.
+    picks the model, so a method's mean ± std spans training seeds. `model_hashes` holds the
+    `Arm.model_hash`es its files record as the arm they were trained on (files written before
+    that was recorded add none).
     """
 
-    def __init__(self, name: str, obj, trained_seeds: dict | None = None):
+    def __init__(
+        self,
+        name: str,
+        obj,
+        trained_seeds: dict | None = None,
+        model_hashes: frozenset = frozenset(),
+    ):
         self.name = name
         self._obj = obj
         self.trained_seeds = trained_seeds or {}
+        self.model_hashes = frozenset(model_hashes)
         try:
             params = inspect.signature(obj.translate).parameters
         except (TypeError, ValueError):
@@ -555,6 +529,8 @@ def load_translator(method: str, cfg: EvalConfig) -> tuple[Translator | None, st
     Only a default checkpoint may be absent: then (None, a note naming the file and the flag that
     gives another). One that was asked for (`translator_source`) and is absent, or any that does
     not load, raises, so a run never reports a table without the method it was asked to score.
+    The arms the files record (`ccgan.finetune.trained_model_hash`) go into
+    `Translator.model_hashes`, for `check_translator_arms`.
 
     Returns:
       (translator, "loaded" or what was loaded) or (None, why).
@@ -568,25 +544,50 @@ def load_translator(method: str, cfg: EvalConfig) -> tuple[Translator | None, st
         if asked:
             raise TranslatorError(f"{method}: no translator checkpoint at {path} ({flag})")
         return None, f"no translator at its default {path} (give one with {flag})"
-    from ccgan import load_translator as load
+    from ccgan import checkpoint
+    from ccgan.finetune import trained_model_hash
+    from ccgan.translator import translator_from_checkpoint
+
+    hashes = set()
 
     def checked(file: Path):
+        """The translator in `file` (as `ccgan.load_translator` reads it); notes its arm."""
         try:
-            return load(path=file)
+            source = checkpoint.load(file)
+            translator = translator_from_checkpoint(source, file)
         except Exception as err:  # noqa: BLE001  (any failure to load is this error)
             raise TranslatorError(
                 f"{method}: {file} does not load ({type(err).__name__}: {err})"
             ) from err
+        hashes.add(trained_model_hash(source[1]))
+        return translator
 
     obj = checked(path)
     # Separately trained seeds beside the checkpoint (`ccgan.train --seeds 0 1 2` writes
     # translator_seed{s}.ckpt): used when there is one for every evaluation seed.
+    seeds, why = {}, "loaded"
     if len(cfg.seeds) > 1:
         files = {s: path.parent / f"translator_seed{s}.ckpt" for s in cfg.seeds}
         if all(f.exists() for f in files.values()):
             seeds = {s: checked(f) for s, f in files.items()}
-            return Translator(method, obj, seeds), f"loaded, trained seeds {list(cfg.seeds)}"
-    return Translator(method, obj), "loaded"
+            why = f"loaded, trained seeds {list(cfg.seeds)}"
+    return Translator(method, obj, seeds, frozenset(hashes - {None})), why
+
+
+def check_translator_arms(translators: dict, arm) -> None:
+    """Refuses translators whose files record training on another arm than `arm`.
+
+    Raises:
+      TranslatorError: a file records another `Arm.model_hash` (another MJCF: e.g. the soft arm
+        for translators of the solid-disc one), which would score them on an arm they never saw.
+    """
+    for method, tr in translators.items():
+        other = sorted(tr.model_hashes - {arm.model_hash})
+        if other:
+            raise TranslatorError(
+                f"{method}: trained on the arm with model hash {', '.join(other)}, but the arm"
+                f" evaluated has {arm.model_hash} (choose the arm with --model)"
+            )
 
 
 def oracle_commands(
@@ -779,8 +780,9 @@ def evaluate(cfg: EvalConfig, command: str = "", log=print) -> dict:
       The results dictionary written to shapes.json (trajectories are kept in memory only).
 
     Raises:
-      TranslatorError: a translator checkpoint that was asked for is absent or does not load;
-        raised before any simulation and before the output folder is made.
+      TranslatorError: a translator checkpoint that was asked for is absent, one does not load,
+        or one records another arm (`check_translator_arms`); raised before any simulation and
+        before the output folder is made.
     """
     import jax
 
@@ -814,13 +816,13 @@ def evaluate(cfg: EvalConfig, command: str = "", log=print) -> dict:
         note = f"the arm {model['file']} is {model['note']}."
         notes.append(note)
         log("NOTE: " + note)
-    out_dir = output_dir(cfg)
-    cfg = dataclasses.replace(cfg, out_dir=str(out_dir))
-    log(f"writing into {out_dir}" + (" (the committed results)" if is_main_job(cfg) else ""))
-
     t0 = time.perf_counter()
     arm_s, arm_c = load_arms(cfg)
     timings["load_s"] = time.perf_counter() - t0
+    check_translator_arms(translators, arm_c)
+    out_dir = output_dir(cfg)
+    cfg = dataclasses.replace(cfg, out_dir=str(out_dir))
+    log(f"writing into {out_dir}" + (" (the committed results)" if is_main_job(cfg) else ""))
 
     run_oracle = "oracle" in cfg.methods
     if run_oracle and jax.default_backend() == "cpu" and cfg.xml is None and cfg.oracle.steps > 0:
@@ -1366,21 +1368,11 @@ FLAGS = {
 }
 
 
-class _HelpFormatter(argparse.ArgumentDefaultsHelpFormatter):
-    """Appends each option's default to its help, except where the help already says what a
-    None default means (e.g. --out, whose default depends on the other settings)."""
-
-    def _get_help_string(self, action):
-        if "(default:" in (action.help or ""):
-            return action.help
-        return super()._get_help_string(action)
-
-
 def build_parser() -> argparse.ArgumentParser:
     """The `python -m eval.shapes` parser: one line of help per option, with its default."""
     p = argparse.ArgumentParser(
         prog="python -m eval.shapes",
-        formatter_class=_HelpFormatter,
+        formatter_class=HelpFormatter,
         description=(
             "Trajectory-tracking evaluation in D_c: the five shapes, each method's D_c commands"
             " scored in the simulator. The main job (`--render` and every other default) REWRITES"
@@ -1458,8 +1450,8 @@ def build_parser() -> argparse.ArgumentParser:
         "--model",
         metavar="MJCF",
         default=EvalConfig.model_path,
-        help="MJCF file of the arm (default: the old solid-disc arm that the committed"
-        " translators were trained on, models/softarm_solid.xml)",
+        help="MJCF file of the arm; by default the old solid-disc arm, on which the committed"
+        " translators were trained",
     )
     p.add_argument(
         "--target-domain",
@@ -1556,7 +1548,7 @@ def parse_args(argv: list[str] | None = None) -> EvalConfig:
         )
         cfg = quick(cfg) if a.quick else cfg
     except ConfigError as err:
-        p.error(f"{FLAGS.get(err.field, err.field)}: {err.reason}")
+        p.error(f"{FLAGS.get(err.field, err.field)} {err.problem}")
     if a.methods is None and "oracle" not in methods:
         print(
             "NOTE: oracle left out by default on CPU (MJX gradients: ~8 min more on 2 cores"

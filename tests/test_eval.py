@@ -322,7 +322,7 @@ def test_mpc_method_and_the_oracle_starting_from_it(small_xml, tmp_path, capsys)
     assert "| shape | stretch | mpc | oracle |" in (tmp_path / "shapes.md").read_text()
     err = capsys.readouterr().err
     assert "oracle Adam steps" in err and "mpc" in err
-    with pytest.raises(ValueError, match="oracle init"):
+    with pytest.raises(ValueError, match="oracle.init"):
         pipeline.OracleConfig(init="zeros")
 
 

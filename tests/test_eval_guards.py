@@ -4,6 +4,7 @@ A quick run never writes results/, every setting is refused before any work, a t
 was asked for must load, reports state their lengths and arm, and long jobs show progress.
 """
 
+import dataclasses
 import hashlib
 import json
 import shutil
@@ -115,7 +116,7 @@ def test_figures_of_a_quick_run_carry_the_mark(tmp_path):
 @pytest.mark.parametrize(
     ("argv", "flag", "reason"),
     [
-        (["--stretch-choices", "0"], "--stretch-choices", "k >= 1"),
+        (["--stretch-choices", "0"], "--stretch-choices", ">= 1, got (0,)"),
         (["--stretch-choices", "5", "5"], "--stretch-choices", "distinct"),
         (["--methods", "bogus"], "--methods", "invalid choice"),
         (["--shapes", "square"], "--shapes", "invalid choice"),
@@ -125,12 +126,12 @@ def test_figures_of_a_quick_run_carry_the_mark(tmp_path):
         (["--seeds"], "--seeds", "expected at least one argument"),
         (["--seeds", "-1"], "--seeds", ">= 0"),
         (["--seeds", "1", "1"], "--seeds", "distinct"),
-        (["--out", "a_file"], "--out", "is a file"),
-        (["--model", "nope.xml"], "--model", "no such file"),
-        (["--ccgan-path", "nope.ckpt"], "--ccgan-path", "no such file"),
-        (["--wcgan-path", "nope.ckpt"], "--wcgan-path", "no such file"),
-        (["--ccgan-sim-path", "nope.ckpt"], "--ccgan-sim-path", "no such file"),
-        (["--oracle-steps", "0"], "--oracle-steps", "at least one Adam step"),
+        (["--out", "a_file"], "--out", "not a folder"),
+        (["--model", "nope.xml"], "--model", "names no file"),
+        (["--ccgan-path", "nope.ckpt"], "--ccgan-path", "names no file"),
+        (["--wcgan-path", "nope.ckpt"], "--wcgan-path", "names no file"),
+        (["--ccgan-sim-path", "nope.ckpt"], "--ccgan-sim-path", "names no file"),
+        (["--oracle-steps", "0"], "--oracle-steps", ">= 1, got 0"),
         (["--oracle-lr", "-1"], "--oracle-lr", "> 0"),
         (["--oracle-horizon", "nan"], "--oracle-horizon", "at least one 0.1 s command"),
     ],
@@ -188,7 +189,8 @@ def test_help_names_the_program_and_shows_every_default():
         if action.dest == "help":
             continue
         text = formatter._get_help_string(action)
-        assert action.help and "default" in text, action.option_strings
+        # Switches are off unless given; every other option shows its default.
+        assert action.help and ("default" in text or action.nargs == 0), action.option_strings
 
 
 def test_a_translator_that_was_asked_for_must_load(small_xml, tmp_path, monkeypatch):
@@ -248,7 +250,7 @@ def test_missing_default_translators_are_skipped_with_a_note(tmp_path, monkeypat
         pipeline.load_translator("wcgan", cfg)
 
 
-def test_wcgan_default_path_calls_the_loader_only_with_a_file(tmp_path, monkeypatch):
+def test_wcgan_default_path_never_calls_the_loader_with_kind(tmp_path, monkeypatch):
     """The WCGAN-GP default: absent -> skipped without calling `ccgan.load_translator` (which
     takes no `kind`); present -> loaded from it, with the trained seeds beside it."""
     import ccgan
@@ -271,14 +273,40 @@ def test_wcgan_default_path_calls_the_loader_only_with_a_file(tmp_path, monkeypa
         shutil.copy(SHIPPED, default.parent / name)
     tr, why = pipeline.load_translator("wcgan", cfg)
     assert sorted(tr.trained_seeds) == [0, 1], why
-    assert [Path(c["path"]).name for c in calls] == [
-        "translator.ckpt",
-        "translator_seed0.ckpt",
-        "translator_seed1.ckpt",
-    ]
+    assert all("kind" not in c for c in calls)
     rest = np.tile([0.0, 0.0, -0.2, 0.0, 0.0, 1.0], (4, 1))  # tip (m), unit d3
     commands, k = tr.translate(np.full((4, 3), 1.0), rest, seed=1)
     assert commands.shape == (4 * k, 3)
+
+
+def test_translators_trained_on_another_arm_are_refused(small_xml, tmp_path, monkeypatch):
+    """A translator file that records its arm's model hash is scored only on that arm."""
+    from ccgan import checkpoint
+
+    monkeypatch.delenv("CCGAN_TRANSLATOR", raising=False)
+    tree, meta = checkpoint.load(SHIPPED)
+    small_hash = hashlib.sha256(small_xml.encode()).hexdigest()[:16]
+    for name, recorded in (("other.ckpt", "0123456789abcdef"), ("same.ckpt", small_hash)):
+        checkpoint.save(tmp_path / name, tree, meta | {"model_hash": recorded})
+    cfg = pipeline.EvalConfig(
+        shapes=("circle",),
+        methods=("none", "ccgan"),
+        ccgan_path=str(tmp_path / "other.ckpt"),
+        seeds=(0,),
+        duration_s=0.5,
+        stretch_candidates=(1,),
+        validation_duration_s=0.5,
+        robustness=False,
+        plots=False,
+        xml=small_xml,
+        out_dir=str(tmp_path / "out"),
+    )
+    with pytest.raises(pipeline.TranslatorError, match="0123456789abcdef"):
+        pipeline.evaluate(cfg, command="test", log=lambda *_: None)
+    assert not (tmp_path / "out").exists()
+    same = dataclasses.replace(cfg, ccgan_path=str(tmp_path / "same.ckpt"))
+    data = pipeline.evaluate(same, command="test", log=lambda *_: None)
+    assert "ccgan" in data["methods_run"] and (tmp_path / "out" / "shapes.md").exists()
 
 
 def test_default_arm_is_the_solid_disc_one_and_model_path_is_used(small_xml, tmp_path):
