@@ -97,5 +97,5 @@ def test_bad_options_stop_before_any_trial(tmp_path, flags, named, capsys):
     flags = [str(tmp_path / f) if f == "FILE" else f for f in flags]
     with pytest.raises(SystemExit) as exc:
         tune.main([*argv, *flags])
-    assert exc.value.code == 2 and named in capsys.readouterr().err
+    assert exc.value.code == 2 and named in capsys.readouterr().err.split("error: ", 1)[1]
     assert not db.parent.exists() and not (tmp_path / "report").exists()

@@ -1,0 +1,388 @@
+"""Guards of the ccgan package: nothing overwritten, nothing mixed, no wrong answer with status 0.
+
+Every bad option, data file or checkpoint must be refused before any work starts, with a message
+naming what is wrong. The data files here are small synthetic `mjx_arm.dataset` files (no
+simulation); the arm is the 3-segment test arm, loaded only for its model hash.
+"""
+
+import argparse
+import dataclasses
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import mjx_arm
+from ccgan import checkpoint, distill, finetune, load_translator, tune
+from ccgan import data as data_lib
+from ccgan import forward as forward_lib
+from ccgan import train as train_lib
+from ccgan.models import Generator
+from ccgan.translator import Translator, translator_path
+from mjx_arm import constants
+from mjx_arm.dataset import Dataset, DatasetError, ModelHashMismatchError, save_dataset
+
+# ----------------------------------------------------------------------------- fixtures
+
+
+@pytest.fixture(scope="module")
+def small_arm(small_xml, tmp_path_factory):
+    """(MJCF path, model hash) of the 3-segment arm."""
+    path = tmp_path_factory.mktemp("arm") / "small.xml"
+    path.write_text(small_xml)
+    return str(path), mjx_arm.load(path).model_hash
+
+
+def write_dataset(path, domain, model_hash, n=4, steps=20, seed=0):
+    """A synthetic babbling file: held random pressures, poses a smooth random walk."""
+    rng = np.random.default_rng(seed)
+    pressures = data_lib.random_held_programs(rng, n, steps).astype(np.float32)
+    poses = np.cumsum(rng.normal(scale=0.01, size=(n, steps, 6)), axis=1).astype(np.float32)
+    low, high = poses.reshape(-1, 6).min(0), poses.reshape(-1, 6).max(0)
+    save_dataset(
+        path,
+        Dataset(pressures, poses, low, high, domain, {}, model_hash, seed=seed, split="train"),
+    )
+    return str(path)
+
+
+@pytest.fixture
+def files(tmp_path, small_arm):
+    """Valid source and constrained files of the small arm: {name: path}."""
+    _, h = small_arm
+    return {
+        "s": write_dataset(tmp_path / "s.npz", "source", h, seed=1),
+        "s2": write_dataset(tmp_path / "s2.npz", "source", h, seed=2),
+        "c": write_dataset(tmp_path / "c.npz", "constrained", h, seed=3),
+    }
+
+
+def usage_error(main, argv, capsys) -> str:
+    """Runs a CLI that must stop with a usage error (status 2); returns its message (the usage
+    lines above it list every flag, so they are cut off)."""
+    with pytest.raises(SystemExit) as exc:
+        main(argv)
+    assert exc.value.code == 2
+    err = capsys.readouterr().err
+    assert "error: " in err
+    return err.split("error: ", 1)[1]
+
+
+TINY_TRAIN = ["--epochs", "1", "--batch-size", "2", "--window-length", "5", "--n-val", "1"]
+TINY_TRAIN += ["--forward-epochs", "1", "--gen-hidden", "4", "--gen-fc", "4"]
+
+
+# ----------------------------------------------------------------------------- data files
+
+
+def test_dataset_files_must_belong_to_their_slot_and_one_arm(tmp_path, files):
+    aged = write_dataset(tmp_path / "a.npz", "aged", "0" * 16, seed=4)
+    # A constrained slot takes any non-source domain; files of one slot are concatenated.
+    d_s, d_c = data_lib.read_translation_files([files["s"], files["s2"]], [files["c"]])
+    assert d_s.pressures_bar.shape == (8, 20, 3) and d_c.domain == "constrained"
+    assert d_s.model_hash == d_c.model_hash
+    assert (d_s.bounds.low <= d_s.poses.reshape(-1, 6).min(0)).all()
+    other_arm = write_dataset(tmp_path / "a_same_arm.npz", "aged", d_s.model_hash, seed=5)
+    assert data_lib.read_domain([other_arm], "constrained").domain == "aged"
+
+    # Source data passed as constrained data, and the other way round.
+    with pytest.raises(DatasetError, match="non-source.*s2.npz \\(source\\)"):
+        data_lib.read_translation_files([files["s"]], [files["s2"]])
+    with pytest.raises(DatasetError, match="'source' data only.*c.npz \\(constrained\\)"):
+        data_lib.read_translation_files([files["c"]], [files["c"]])
+    # One slot mixing domains, or arms (model hashes: e.g. another segment count).
+    with pytest.raises(DatasetError, match="mix domains"):
+        data_lib.read_domain([files["c"], other_arm], "constrained")
+    other_hash = write_dataset(tmp_path / "c0.npz", "constrained", "0" * 16, seed=6)
+    with pytest.raises(DatasetError, match="segment count.*c0.npz \\(0000000000000000\\)"):
+        data_lib.read_domain([files["c"], other_hash], "constrained")
+    # Both slots from different arms.
+    with pytest.raises(DatasetError, match="different arms.*s.npz.*a.npz"):
+        data_lib.read_translation_files([files["s"]], [aged])
+    # Programs of different lengths in one slot.
+    longer = write_dataset(tmp_path / "long.npz", "source", d_s.model_hash, steps=30)
+    with pytest.raises(DatasetError, match="program lengths.*long.npz \\(30\\)"):
+        data_lib.read_domain([files["s"], longer])
+    # The arm the caller names: both hashes in the message.
+    with pytest.raises(ModelHashMismatchError, match=f"{d_s.model_hash}.*{'f' * 16}"):
+        data_lib.read_domain([files["s"]], "source", model_hash="f" * 16)
+
+
+def test_train_cli_refuses_mixed_or_wrong_arm_data(tmp_path, files, small_arm, capsys):
+    model, model_hash = small_arm
+    workdir = tmp_path / "run"
+    base = ["--model", model, "--workdir", str(workdir), *TINY_TRAIN]
+    # Source files passed as --constrained: named in the message.
+    err = usage_error(
+        train_lib.main, ["--source", files["s"], "--constrained", files["s2"], *base], capsys
+    )
+    assert "--constrained" in err and "s2.npz (source)" in err
+    # Data of another arm than --model: both hashes named.
+    other = write_dataset(tmp_path / "o.npz", "constrained", "e" * 16)
+    err = usage_error(
+        train_lib.main, ["--source", files["s"], "--constrained", other, *base], capsys
+    )
+    assert "e" * 16 in err and model_hash in err and "o.npz" in err
+    # A truncated file: a clear message naming it, not a BadZipFile traceback.
+    cut = tmp_path / "cut.npz"
+    cut.write_bytes(open(files["c"], "rb").read()[:300])
+    err = usage_error(
+        train_lib.main, ["--source", files["s"], "--constrained", str(cut), *base], capsys
+    )
+    assert "cut.npz" in err and "Traceback" not in err
+    # More held-out trajectories than there are: refused before training anything.
+    argv = ["--source", files["s"], "--constrained", files["c"], *base, "--n-val", "9"]
+    assert "n_val=9" in usage_error(train_lib.main, argv, capsys)
+    assert not workdir.exists()
+
+
+# ----------------------------------------------------------------------------- options
+
+
+@pytest.mark.parametrize(
+    "flags, named",
+    [
+        (["--epochs", "0"], "--epochs"),
+        (["--epochs", "-1"], "--epochs"),
+        (["--lr-generator", "-1"], "--lr-generator"),
+        (["--lr-critic", "0"], "--lr-critic"),
+        (["--batch-size", "0"], "--batch-size"),
+        (["--window-length", "1"], "--window-length"),
+        (["--stretch-choices", "0", "5"], "--stretch-choices"),
+        (["--beta2", "1"], "--beta2"),
+        (["--forward-epochs", "0"], "--forward-epochs"),
+        (["--forward-lr", "nan"], "--forward-lr"),
+        (["--seeds", "1", "1"], "--seeds"),
+    ],
+)
+def test_train_cli_refuses_bad_options_before_any_work(tmp_path, files, flags, named, capsys):
+    workdir = tmp_path / "run"
+    argv = ["--source", files["s"], "--constrained", files["c"], "--workdir", str(workdir)]
+    err = usage_error(train_lib.main, [*argv, *TINY_TRAIN, *flags], capsys)
+    assert named in err
+    assert not workdir.exists()  # nothing written: no untrained translator
+
+
+def test_train_cli_refuses_a_file_as_workdir(tmp_path, files, capsys):
+    workdir = tmp_path / "run"
+    workdir.write_text("my notes")
+    argv = ["--source", files["s"], "--constrained", files["c"], "--workdir", str(workdir)]
+    assert "--workdir" in usage_error(train_lib.main, [*argv, *TINY_TRAIN], capsys)
+    assert workdir.read_text() == "my notes"
+
+
+@pytest.mark.parametrize(
+    "cls, kwargs, field",
+    [
+        (train_lib.TrainConfig, {"epochs": 0}, "epochs"),
+        (train_lib.TrainConfig, {"lr_generator": -1.0}, "lr_generator"),
+        (train_lib.TrainConfig, {"window_length": 1}, "window_length"),
+        (train_lib.TrainConfig, {"batch_size": 0}, "batch_size"),
+        (train_lib.TrainConfig, {"stretch_choices": ()}, "stretch_choices"),
+        (train_lib.TrainConfig, {"lambda_cycle": float("inf")}, "lambda_cycle"),
+        (train_lib.TrainConfig, {"feedback_impl": "fast"}, "feedback_impl"),
+        (tune.SearchSpace, {"window_lengths": (1, 5)}, "window_lengths"),
+        (tune.SearchSpace, {"lr_critic": (1e-3, 1e-5)}, "lr_critic"),
+        (finetune.FinetuneConfig, {"steps": 0}, "steps"),
+        (finetune.FinetuneConfig, {"batch_size": 0}, "batch_size"),
+        (finetune.FinetuneConfig, {"n_train": 8, "batch_size": 9}, "batch_size"),
+        (finetune.FinetuneConfig, {"window_s": 2.0, "anchor_s": 2.0}, "anchor_s"),
+        (finetune.FinetuneConfig, {"learning_rates": (1e-3, 0.0)}, "learning_rates"),
+        (distill.DistillConfig, {"batch_size": 0}, "batch_size"),
+        (distill.DistillConfig, {"epochs": 0}, "epochs"),
+        (distill.DistillConfig, {"n_val": 0}, "n_val"),
+        (distill.DistillConfig, {"learning_rate": -1e-3}, "learning_rate"),
+    ],
+)
+def test_configs_refuse_unusable_values(cls, kwargs, field):
+    with pytest.raises(train_lib.ConfigError, match=f"^{field} ") as exc:
+        cls(**kwargs)
+    assert exc.value.field == field and isinstance(exc.value, ValueError)
+
+
+def test_tuned_hyperparameters_still_trace():
+    """`ccgan.tune` replaces learning rates by traced values inside jit: not checked there."""
+    f = jax.jit(lambda lr: dataclasses.replace(train_lib.TrainConfig(), lr_generator=lr).epochs)
+    assert f(jnp.float32(1e-3)) == 550
+
+
+@pytest.fixture(scope="module")
+def shipped():
+    return str(translator_path())
+
+
+@pytest.mark.parametrize(
+    "main, flags, named",
+    [
+        (finetune.main, ["--steps", "0"], "--steps"),
+        (finetune.main, ["--window-s", "2", "--anchor-s", "2"], "--anchor-s"),
+        (finetune.main, ["--n-train", "8", "--batch-size", "9"], "--batch-size"),
+        (finetune.main, ["--learning-rates", "1e-3", "-1"], "--learning-rates"),
+        (finetune.main, ["--domain", "source"], "--domain"),
+        (distill.main, ["--batch-size", "0"], "--batch-size"),
+        (distill.main, ["--epochs", "0"], "--epochs"),
+        (distill.main, ["--learning-rate", "0"], "--learning-rate"),
+        (distill.main, ["--n-val", "0"], "--n-val"),
+    ],
+)
+def test_stage_clis_refuse_bad_options_before_any_work(
+    tmp_path, small_arm, shipped, main, flags, named, capsys
+):
+    out = tmp_path / "out"
+    argv = ["--translators", shipped, "--out", str(out), "--model", small_arm[0], *flags]
+    err = usage_error(main, argv, capsys)
+    assert named in err
+    assert not out.exists()  # no teacher cache, no translator
+
+
+@pytest.mark.parametrize("main", [finetune.main, distill.main])
+def test_stage_clis_refuse_bad_paths(tmp_path, small_arm, shipped, main, capsys):
+    out = tmp_path / "out"
+    base = ["--translators", shipped, "--out"]
+    assert "--model" in usage_error(
+        main, [*base, str(out), "--model", str(tmp_path / "none.xml")], capsys
+    )
+    (tmp_path / "file").write_text("")
+    err = usage_error(main, [*base, str(tmp_path / "file"), "--model", small_arm[0]], capsys)
+    assert "--out" in err
+    garbage = tmp_path / "garbage.ckpt"
+    garbage.write_bytes(np.random.default_rng(0).bytes(300))
+    argv = ["--translators", str(garbage), "--out", str(out), "--model", small_arm[0]]
+    err = usage_error(main, argv, capsys)
+    assert "garbage.ckpt" in err and len(err) < 2000
+    assert not out.exists()
+
+
+def test_stages_simulate_the_arm_named_by_model(tmp_path, small_arm, shipped, capsys):
+    """Default: the solid-disc arm the committed translators were trained on; a translator
+    recorded on another arm is refused."""
+    for module in (finetune, distill):
+        p = module.build_parser()
+        assert p.parse_args(["--translators", "t", "--out", "o"]).model == str(
+            constants.SOLID_MODEL_PATH
+        )
+    model, model_hash = small_arm
+    p = finetune.build_parser()
+    a = p.parse_args(["--translators", shipped, "--out", str(tmp_path / "o"), "--model", model])
+    stage = finetune.start_stage(p, a, "ccgan.finetune", {}, [])
+    assert stage.arm_c.model_hash == stage.arm_s.model_hash == model_hash
+    assert stage.arm_c.domain.name == "constrained" and stage.arm_s.domain.name == "source"
+    assert stage.run["model"] == model and stage.run["model_hash"] == model_hash
+
+    tree, meta = checkpoint.load(shipped)
+    other = checkpoint.save(tmp_path / "other.ckpt", tree, meta | {"model_hash": "d" * 16})
+    argv = ["--translators", str(other), "--out", str(tmp_path / "o2"), "--model", model]
+    err = usage_error(finetune.main, argv, capsys)
+    assert "d" * 16 in err and model_hash in err
+
+
+# ----------------------------------------------------------------------------- help
+
+
+@pytest.mark.parametrize("module", [train_lib, tune, finetune, distill])
+def test_every_option_has_help_and_a_shown_default(module):
+    name = module.__name__
+    p = module.build_parser()
+    assert p.prog == f"python -m {name}"
+    assert issubclass(p.formatter_class, argparse.ArgumentDefaultsHelpFormatter)
+    for action in p._actions:
+        assert action.help and action.help.strip(), f"{name}: {action.option_strings} has no help"
+    text = p.format_help()
+    assert f"usage: python -m {name}" in text and "(default: " in text
+    if module is train_lib:
+        assert "--epochs EPOCHS" in text and "(default: 550)" in text
+
+
+# ----------------------------------------------------------------------------- progress
+
+
+def test_forward_training_shows_progress(tmp_path, capsys):
+    """F_s and F_c train for minutes at the default settings: a bar says where it stands."""
+    rng = np.random.default_rng(0)
+    arrays = []
+    for _ in range(2):
+        p = data_lib.random_held_programs(rng, 3, 10)
+        arrays += [p, np.cumsum(rng.normal(scale=0.01, size=(3, 10, 6)), axis=1)]
+    data = data_lib.prepare(*arrays, window_length=5, n_val=1)
+    fconf = forward_lib.ForwardConfig(epochs=2, batch_size=2, hidden=4, fc=4)
+    report = train_lib.train_forward_models(fconf, data, tmp_path, progress=True)
+    err = capsys.readouterr().err
+    assert "forward models" in err and "2/2" in err
+    assert set(report) == {"forward_s", "forward_c"} and (tmp_path / "forward_c.ckpt").exists()
+
+
+# ----------------------------------------------------------------------------- translator
+
+
+@pytest.fixture(scope="module")
+def tiny_translator():
+    gen = Generator(hidden=4, fc=8)
+    params = gen.init(jax.random.PRNGKey(0), jnp.zeros((1, 3, 9)))
+    bounds = data_lib.PoseBounds(np.array([-0.1, -0.1, -0.25, -0.5, -0.5, -1.0]), np.ones(6))
+    return Translator(params, k=2, bounds=bounds, generator=gen)
+
+
+def _program(t=6):
+    pressures = np.full((t, 3), 1.0)
+    poses = np.tile([0.01, 0.0, -0.2, 0.0, 0.0, -1.0], (t, 1))
+    return pressures, poses
+
+
+def test_translate_refuses_nan_and_implausible_units(tiny_translator):
+    p, x = _program()
+    out, k = tiny_translator.translate(p, x)
+    assert out.shape == (12, 3) and k == 2
+    cases = []
+    bad = p.copy()
+    bad[3, 1] = np.nan
+    cases.append((bad, x, "pressures have non-finite.*step 3"))
+    bad = x.copy()
+    bad[2, 0] = np.inf
+    cases.append((p, bad, "poses have non-finite.*step 2"))
+    cases.append((p * 100.0, x, "outside the plausible.*bar"))  # kPa
+    cases.append((-p, x, "outside the plausible.*bar"))
+    bad = x.copy()
+    bad[:, :3] *= 1000.0  # millimetres
+    cases.append((p, bad, "metres"))
+    bad = x.copy()
+    bad[:, 3:] *= 2.0
+    cases.append((p, bad, "unit d3.*norm is 2"))
+    cases.append((p[:0], x[:0], "empty"))
+    for pressures, poses, match in cases:
+        with pytest.raises(ValueError, match=match):
+            tiny_translator.translate(pressures, poses)
+
+
+# ----------------------------------------------------------------------------- checkpoints
+
+
+def test_load_translator_paths(tmp_path, monkeypatch):
+    with pytest.raises(ValueError, match="empty translator path"):
+        load_translator("")
+    monkeypatch.setenv("CCGAN_TRANSLATOR", "")  # an empty variable counts as unset
+    assert translator_path() == translator_path(None) != translator_path("x")
+    missing = tmp_path / "missing.ckpt"
+    with pytest.raises(FileNotFoundError, match="missing.ckpt"):
+        load_translator(missing)
+    with pytest.raises(checkpoint.CheckpointError):  # still a CheckpointError too
+        load_translator(missing)
+    garbage = tmp_path / "random.ckpt"
+    for seed in range(5):
+        garbage.write_bytes(np.random.default_rng(seed).bytes(4000))
+        with pytest.raises(checkpoint.CheckpointError, match="random.ckpt") as exc:
+            load_translator(garbage)
+        assert len(str(exc.value)) < 200 and "\\x" not in str(exc.value)
+
+
+def test_changed_config_names_the_differing_fields(tmp_path):
+    meta = {"config": {"epochs": 10, "lr": 1e-4, "nested": {"a": [1, 2]}}, "data": "abc"}
+    path = checkpoint.save(tmp_path / "s.ckpt", {"x": np.zeros(2)}, meta)
+    want = {"config": {"epochs": 10, "lr": 3e-4, "nested": {"a": [1, 3]}, "new": 1}}
+    with pytest.raises(checkpoint.CheckpointError, match="does not match this run") as exc:
+        checkpoint.load(path, expect=want)
+    msg = str(exc.value)
+    assert "config.lr: stored 0.0001, this run 0.0003" in msg
+    assert "config.nested.a: stored [1, 2], this run [1, 3]" in msg
+    assert "config.new: not stored, this run 1" in msg
+    assert "epochs" not in msg  # unchanged fields are not listed
