@@ -1,36 +1,75 @@
-"""Throughput of batched arm rollouts: MJX on the accelerator beside MuJoCo C on all CPU cores.
+"""Batched arm rollouts per second: MJX (JAX or Warp) on the accelerator, MuJoCo C on all cores.
 
-Both backends run the same model, domain, timestep and pressure programs (`Arm.rollout`). MJX is
-jitted and vmapped over the batch, and the batch is sharded over all local devices; its compile
-time is measured separately. MuJoCo C runs `mujoco.rollout` with one thread per CPU core.
+Every backend runs the same model, domain, timestep and pressure programs (`Arm.rollout`'s
+program: valves, substeps, the tip pose read once per control period). MJX is jitted and vmapped
+over the batch, and the batch is sharded over all local devices; its compile time and the extra
+time of its first call (Warp builds its CUDA kernels then) are measured apart from the timed
+call. MuJoCo C runs `mujoco.rollout` with one thread per CPU core.
 
-    python -m bench.throughput --out bench/results            # on a GPU machine
-    python -m bench.throughput --quick                        # CPU smoke run
-    python -m bench.throughput --set timestep_s=0.002 ...     # a variant of ArmParams
+Implementations (`--impl`, each listed one is run):
+  jax   MJX-JAX: `mjx_arm.arm.rollout_program`, the function behind `Arm.rollout_fn()`.
+  warp  MJX-Warp (`mjx.put_model(m, impl="warp")`, needs warp-lang==1.18.0, NVIDIA GPU or CPU):
+        the same program, except that `mjx.make_data` is given the host `mujoco.MjModel` and
+        impl="warp", since it refuses an `mjx.Model` (`rollout_program_warp`). No gradients.
+Both take the rest state as an argument, so one compiled program serves every domain of a
+segment count (the domains differ only in model values).
 
-Writes throughput.md and throughput.json to --out (with the overrides in the name).
+Pose check: the first `--check-batch` programs of the smallest batch are compared with MuJoCo C
+(float64) and, for warp, with MJX-JAX on the same programs; the largest tip-position (mm) and
+d3-director differences are recorded.
+
+    python -m bench.throughput --out bench/results/h200               # on a GPU machine
+    python -m bench.throughput --impl jax warp --segments 10 20 30 --batches 8192 32768 --seconds 2
+    python -m bench.throughput --quick                                # CPU smoke run
+    python -m bench.throughput --set timestep_s=0.002 ...             # a variant of ArmParams
+    python -m bench.throughput --report-only --out DIR --merge other.json   # tables from results
+
+Writes throughput{tag}.md, throughput{tag}.json and throughput{tag}_check_poses.npz to --out (the
+tag names the overrides, and "_segments" with --segments; not the implementations or counts).
+With --append, the rows, checks and poses already there are kept (rows of the same segments,
+domain, impl and batch are replaced), so runs of one implementation or segment count after
+another end in one table. Files are rewritten after every row, so a run stopped part-way leaves
+what it measured.
 """
 
 from __future__ import annotations
 
 import argparse
+import copy
 import dataclasses
 import json
 import os
+import shlex
+import sys
 import time
+from importlib import metadata
 from pathlib import Path
 
 import jax
 import jax.numpy as jnp
+import mujoco
 import numpy as np
 from jax.sharding import Mesh, NamedSharding, PartitionSpec
 
 import mjx_arm  # sets the XLA CPU flag; jax reads it when its backend starts
+from mjx_arm import valve
+from mjx_arm.arm import (
+    MAX_JOINT_SPEED,
+    mjx,  # imported by mjx_arm without its notice when warp is absent
+    rollout_program,
+)
 from mjx_arm.machine import cpu_model
+
+IMPLS = ("jax", "warp")
+IMPL_NAMES = {"jax": "MJX-JAX", "warp": "MJX-Warp"}
+DOMAIN_ORDER = ("source", "constrained")
 
 
 def programs(batch: int, periods: int, seed: int = 0) -> np.ndarray:
-    """Random targets in [0, 3.5] bar held 0.5-2 s: [batch, periods, 3]."""
+    """Random targets in [0, 3.5] bar held 0.5-2 s: [batch, periods, 3].
+
+    Row b does not depend on `batch`, so the first rows of any two batches are the same programs.
+    """
     rng = np.random.default_rng(seed)
     out = np.empty((batch, periods, 3))
     for b in range(batch):
@@ -42,22 +81,121 @@ def programs(batch: int, periods: int, seed: int = 0) -> np.ndarray:
     return out
 
 
-def time_mjx(arm: mjx_arm.Arm, batch: int, periods: int) -> dict:
+def rollout_program_warp(
+    mjx_model: mjx.Model,
+    commands_bar: jnp.ndarray,
+    *,
+    mj_model: mujoco.MjModel,
+    tip_site: int,
+    actuators: tuple[int, ...],
+    n_substeps: int,
+    valve_params: valve.ValveParams,
+    rest_qpos: jnp.ndarray,
+    rest_qvel: jnp.ndarray,
+):
+    """`mjx_arm.arm.rollout_program` for an MJX-Warp model: one program [T, 3] (bar) -> poses
+    [T, 6] and ok flags [T].
+
+    The same program line for line, except the first: MJX-Warp's `make_data` needs the host
+    `mujoco.MjModel` (any domain of the arm: it only sizes and initialises the data, and qpos and
+    qvel are replaced by the rest state). The pose check against MJX-JAX and MuJoCo C guards the
+    copy against drifting from the original.
+    """
+    dtype = commands_bar.dtype
+    data = mjx.make_data(mj_model, impl="warp")
+    data = data.replace(qpos=rest_qpos.astype(dtype), qvel=rest_qvel.astype(dtype))
+    actuators = jnp.asarray(actuators)
+    timestep = mjx_model.opt.timestep
+    p0 = jnp.full((3,), valve_params.p_min_bar, dtype)
+    commands = valve.saturate(commands_bar, valve_params)
+
+    def physics_step(data, pressure):
+        data = data.replace(ctrl=data.ctrl.at[actuators].set(pressure))
+        return mjx.step(mjx_model, data), None
+
+    def control_step(carry, command):
+        data, pressure, healthy = carry
+        pressures = valve.substep_pressures(pressure, command, n_substeps, timestep, valve_params)
+        data, _ = jax.lax.scan(physics_step, data, pressures)
+        pose = jnp.concatenate([data.site_xpos[tip_site], data.site_xmat[tip_site][:, 2]])
+        finite = jnp.isfinite(data.qpos).all() & jnp.isfinite(data.qvel).all()
+        healthy = healthy & finite & (jnp.abs(data.qvel).max() < MAX_JOINT_SPEED)
+        return (data, pressures[-1], healthy), (pose, healthy)
+
+    _, (poses, ok) = jax.lax.scan(control_step, (data, p0, jnp.array(True)), commands)
+    return poses, ok
+
+
+def host_model(arm: mjx_arm.Arm) -> mujoco.MjModel:
+    """The arm's model as MJX runs it: sensors off (rollouts read the tip site directly)."""
+    m = copy.copy(arm.mj_model)
+    m.opt.disableflags |= mujoco.mjtDisableBit.mjDSBL_SENSOR
+    return m
+
+
+def device_model(arm: mjx_arm.Arm, impl: str) -> mjx.Model:
+    if impl == "jax":
+        return arm.mjx_model
+    return mjx.put_model(host_model(arm), impl="warp")
+
+
+def batched_rollout(arm: mjx_arm.Arm, impl: str):
+    """jit(vmap(program)): (model, commands [B, T, 3], rest_qpos, rest_qvel) -> (poses, ok)."""
+    bound = dict(
+        tip_site=arm.tip_site_id,
+        actuators=tuple(int(i) for i in arm.actuator_ids),
+        n_substeps=arm.n_substeps,
+        valve_params=arm.valve,
+    )
+    if impl == "jax":
+        program = rollout_program
+    else:
+        program = rollout_program_warp
+        bound["mj_model"] = host_model(arm)
+
+    def one(model, commands, rest_qpos, rest_qvel):
+        return program(model, commands, rest_qpos=rest_qpos, rest_qvel=rest_qvel, **bound)
+
+    return jax.jit(jax.vmap(one, in_axes=(None, 0, None, None)))
+
+
+def same_signature(a, b) -> bool:
+    """Whether two models can share one compiled program (same tree, static fields, shapes)."""
+    ta, tb = jax.tree_util.tree_structure(a), jax.tree_util.tree_structure(b)
+    if ta != tb:
+        return False
+    la, lb = jax.tree_util.tree_leaves(a), jax.tree_util.tree_leaves(b)
+    return all(
+        np.shape(x) == np.shape(y) and jnp.result_type(x) == jnp.result_type(y)
+        for x, y in zip(la, lb, strict=True)
+    )
+
+
+def sharded_commands(batch: int, periods: int):
     devices = jax.devices()
     mesh = Mesh(np.array(devices), ("batch",))
     padded = -(-batch // len(devices)) * len(devices)
     commands = jnp.asarray(programs(padded, periods), dtype=jnp.float32)
-    commands = jax.device_put(commands, NamedSharding(mesh, PartitionSpec("batch")))
-    fn = jax.jit(jax.vmap(arm.rollout_fn(), in_axes=(None, 0)))
+    return jax.device_put(commands, NamedSharding(mesh, PartitionSpec("batch"))), padded
+
+
+def time_mjx(compiled, model, commands, rest: tuple, n_keep: int) -> dict:
+    """First (warm-up) call and a timed call; returns times and the first n_keep poses."""
     start = time.perf_counter()
-    compiled = fn.lower(arm.mjx_model, commands).compile()
-    compile_s = time.perf_counter() - start
-    jax.block_until_ready(compiled(arm.mjx_model, commands))  # warm-up
+    jax.block_until_ready(compiled(model, commands, *rest))
+    first = time.perf_counter() - start
     start = time.perf_counter()
-    poses, ok = jax.block_until_ready(compiled(arm.mjx_model, commands))
+    poses, ok = jax.block_until_ready(compiled(model, commands, *rest))
     wall = time.perf_counter() - start
-    assert bool(np.asarray(ok).all()), "MJX rollout diverged"
-    return {"compile_s": compile_s, "wall_s": wall, "batch": padded}
+    ok = np.asarray(ok)
+    if not ok.all():
+        bad = np.flatnonzero(~ok[:, -1])
+        raise RuntimeError(f"MJX rollout diverged in {bad.size} trajectories, e.g. {bad[:5]}")
+    return {
+        "first_call_s": first,
+        "wall_s": wall,
+        "poses": np.asarray(poses[:n_keep], dtype=np.float64),
+    }
 
 
 def time_c(arm: mjx_arm.Arm, batch: int, periods: int) -> dict:
@@ -68,11 +206,179 @@ def time_c(arm: mjx_arm.Arm, batch: int, periods: int) -> dict:
     return {"wall_s": time.perf_counter() - start, "batch": batch}
 
 
+def pose_diff(a: np.ndarray, b: np.ndarray) -> dict:
+    """Largest tip-position (mm) and d3 differences between poses [..., 6]."""
+    return {
+        "pos_mm": round(float(np.abs(a[..., :3] - b[..., :3]).max()) * 1e3, 6),
+        "d3": float(f"{float(np.abs(a[..., 3:] - b[..., 3:]).max()):.3g}"),
+    }
+
+
+def version(dist: str) -> str | None:
+    try:
+        return metadata.version(dist)
+    except metadata.PackageNotFoundError:
+        return None
+
+
+def fmt(x) -> str:
+    return "" if x is None else f"{x:.3g}"
+
+
+def row_key(r: dict) -> tuple:
+    return (r["segments"], r["domain"], r["impl"], r["batch"])
+
+
+def check_key(c: dict) -> tuple:
+    return (c["segments"], c["domain"], c["impl"])
+
+
+class Results:
+    """Rows, pose checks and check poses of a run, kept in --out and rewritten after each row."""
+
+    def __init__(self, out: Path, tag: str, machine: dict, command: str, append: bool):
+        self.json_path = out / f"throughput{tag}.json"
+        self.md_path = out / f"throughput{tag}.md"
+        self.poses_path = out / f"throughput{tag}_check_poses.npz"
+        self.machine, self.rows, self.checks, self.poses, self.commands = machine, [], [], {}, []
+        if append:
+            self.merge(self.json_path)
+            if self.poses_path.exists():
+                with np.load(self.poses_path) as f:
+                    self.poses.update({k: f[k] for k in f.files})
+        if command:
+            self.commands.append(command)
+
+    def merge(self, path: Path) -> None:
+        if not path.exists():
+            return
+        old = json.loads(path.read_text())
+        for r in old.get("rows", []):
+            self.add_row(r, write=False)
+        for c in old.get("checks", []):
+            self.add_check(c, write=False)
+        self.commands = old.get("commands", []) + self.commands
+        self.machine = {**old.get("machine", {}), **self.machine}
+
+    def add_row(self, row: dict, write: bool = True) -> None:
+        self.rows = [r for r in self.rows if row_key(r) != row_key(row)] + [row]
+        if write:
+            self.write()
+
+    def add_check(self, check: dict, write: bool = True) -> None:
+        self.checks = [c for c in self.checks if check_key(c) != check_key(check)] + [check]
+        if write:
+            self.write()
+
+    def write(self) -> None:
+        self.json_path.parent.mkdir(parents=True, exist_ok=True)
+        order = {impl: i for i, impl in enumerate(IMPLS)}
+
+        def domain(name: str) -> tuple:
+            return (DOMAIN_ORDER.index(name) if name in DOMAIN_ORDER else 99, name)
+
+        self.rows.sort(
+            key=lambda r: (r["segments"], domain(r["domain"]), order[r["impl"]], r["batch"])
+        )
+        self.checks.sort(key=lambda c: (c["segments"], domain(c["domain"]), order[c["impl"]]))
+        data = {
+            "machine": self.machine,
+            "commands": self.commands,
+            "rows": self.rows,
+            "checks": self.checks,
+        }
+        self.json_path.write_text(json.dumps(data, indent=1) + "\n")
+        if self.poses:
+            np.savez_compressed(self.poses_path, **self.poses)
+        self.md_path.write_text(self.markdown())
+
+    def markdown(self) -> str:
+        m = self.machine
+        r0 = self.rows[0] if self.rows else {}
+        lines = [
+            "# Rollout throughput: MJX-JAX and MJX-Warp beside MuJoCo C",
+            "",
+            f"Machine: {m.get('accelerator')} ({m.get('backend')}), CPU {m.get('cpu')} x"
+            f" {m.get('cpu_cores')} cores; jax {m.get('jax')}, mujoco {m.get('mujoco')},"
+            f" mujoco-mjx {m.get('mujoco_mjx')}, warp-lang {m.get('warp_lang')}.",
+            f"Model: {r0.get('model', '')} {r0.get('overrides') or ''}; segment counts other than"
+            " the committed 10 from `generate_xml(dataclasses.replace(ArmParams(),"
+            " n_segments=N))`. Step at the model's timestep"
+            f" ({r0.get('timestep_s', '?')} s), {r0.get('sim_seconds', '?')} simulated s per"
+            " rollout. MJCF hashes (`Arm.model_hash`): "
+            + ", ".join(
+                f"{n} segments {h}"
+                for n, h in sorted({(r["segments"], r.get("model_hash")) for r in self.rows})
+            )
+            + ".",
+            f"MuJoCo C: `mujoco.rollout`, {m.get('cpu_cores')} threads, batch"
+            f" {r0.get('c_batch', '?')}, measured once per segment count and domain in each run.",
+            "Compile: lower + XLA compile. First-call extra: the warm-up call's time less the"
+            " timed call's (Warp builds and loads its CUDA kernels then; the kernel cache"
+            " ~/.cache/warp was empty at the start of the run only for its first program)."
+            " 'shared': the program compiled for the first domain served this one.",
+            "Commands:",
+            *[f"- `{c}`" for c in self.commands],
+            "",
+            "| segments | nv | domain | impl | batch | compile s | first-call extra s"
+            " | MJX sim s/s | MJX steps/s | C sim s/s | MJX / C | Warp / JAX |",
+            "|---|---|---|---|---|---|---|---|---|---|---|---|",
+        ]
+        jax_rate = {
+            (r["segments"], r["domain"], r["batch"]): r["mjx_sim_s_per_s"]
+            for r in self.rows
+            if r["impl"] == "jax"
+        }
+        for r in self.rows:
+            compile_s = "shared" if r.get("compile_shared") else f"{r['mjx_compile_s']:.1f}"
+            base = jax_rate.get((r["segments"], r["domain"], r["batch"]))
+            vs_jax = f"{r['mjx_sim_s_per_s'] / base:.2f}" if r["impl"] == "warp" and base else ""
+            extra = max(0.0, r["mjx_first_call_s"] - r["mjx_wall_s"])
+            lines.append(
+                f"| {r['segments']} | {r['nv']} | {r['domain']} | {IMPL_NAMES[r['impl']]}"
+                f" | {r['batch']} | {compile_s} | {extra:.1f} | {r['mjx_sim_s_per_s']:.0f}"
+                f" | {r['mjx_steps_per_s']:.3g} | {r['c_sim_s_per_s']:.0f} | {r['mjx_over_c']}"
+                f" | {vs_jax} |"
+            )
+        lines += [
+            "",
+            "Pose check: the same programs from rest, largest difference over every control"
+            " period of the tip position (mm) and of the unit d3 director. MJX runs in float32,"
+            " MuJoCo C in float64.",
+            "",
+            "| segments | domain | impl | programs | vs C: tip mm | vs C: d3 | vs MJX-JAX: tip mm"
+            " | vs MJX-JAX: d3 |",
+            "|---|---|---|---|---|---|---|---|",
+        ]
+        for c in self.checks:
+            vj = c.get("vs_jax") or {}
+            lines.append(
+                f"| {c['segments']} | {c['domain']} | {IMPL_NAMES[c['impl']]} | {c['programs']}"
+                f" | {fmt(c['vs_c']['pos_mm'])} | {fmt(c['vs_c']['d3'])}"
+                f" | {fmt(vj.get('pos_mm'))} | {fmt(vj.get('d3'))} |"
+            )
+        return "\n".join(lines) + "\n"
+
+
+def parse_overrides(items: list[str]) -> dict:
+    overrides = {}
+    for item in items:
+        field, value = item.split("=", 1)
+        default = getattr(mjx_arm.ArmParams(), field)
+        overrides[field] = (
+            value.lower() in ("1", "true") if isinstance(default, bool) else type(default)(value)
+        )
+    return overrides
+
+
 def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--impl", nargs="+", choices=IMPLS, default=["jax"])
     parser.add_argument("--domains", nargs="+", default=["source", "constrained"])
+    parser.add_argument("--segments", type=int, nargs="+", default=None, help="n_segments each")
     parser.add_argument("--batches", type=int, nargs="+", default=[1024, 4096, 16384, 65536])
     parser.add_argument("--c-batch", type=int, default=None, help="C batch (default 16/core)")
+    parser.add_argument("--check-batch", type=int, default=64, help="programs in the pose check")
     parser.add_argument("--seconds", type=float, default=10.0, help="simulated s per rollout")
     parser.add_argument("--quick", action="store_true", help="tiny CPU smoke run")
     parser.add_argument(
@@ -82,14 +388,27 @@ def main(argv: list[str] | None = None) -> None:
         metavar="FIELD=VALUE",
         help="generate the model from ArmParams with this field changed (repeatable)",
     )
-    parser.add_argument("--label", default="committed model", help="name of the model variant")
+    parser.add_argument(
+        "--label",
+        default="ArmParams() (models/softarm.xml at its 10 segments)",
+        help="name of the model variant",
+    )
     parser.add_argument("--out", type=Path, default=Path("bench/results"))
+    parser.add_argument("--append", action="store_true", help="keep the results in --out")
+    parser.add_argument("--report-only", action="store_true", help="only rewrite the tables")
+    parser.add_argument("--merge", type=Path, nargs="*", default=[], help="more result json")
     args = parser.parse_args(argv)
     if args.quick:
         args.batches, args.seconds = [8], 1.0
+    overrides = parse_overrides(args.set)
+    if args.segments and "n_segments" in overrides:
+        parser.error("give --segments or --set n_segments=N, not both")
+    segments = args.segments or [None]
+    impls = [impl for impl in IMPLS if impl in args.impl]  # jax first: warp is checked against it
     periods = int(round(args.seconds * 10))
     cores = os.cpu_count() or 1
     c_batch = args.c_batch or 16 * cores
+    n_check = max(1, min(args.check_batch, *args.batches))
 
     device = jax.devices()[0]
     machine = {
@@ -98,73 +417,101 @@ def main(argv: list[str] | None = None) -> None:
         "cpu": cpu_model(),
         "cpu_cores": cores,
         "jax": jax.__version__,
+        "mujoco": mujoco.__version__,
+        "mujoco_mjx": version("mujoco-mjx"),
+        "warp_lang": version("warp-lang"),
     }
-    rows = []
-    overrides = {}
-    for item in args.set:
-        field, value = item.split("=", 1)
-        default = getattr(mjx_arm.ArmParams(), field)
-        overrides[field] = (
-            value.lower() in ("1", "true") if isinstance(default, bool) else type(default)(value)
-        )
-    xml = mjx_arm.generate_xml(dataclasses.replace(mjx_arm.ArmParams(), **overrides))
-    for domain in args.domains:
-        arm = mjx_arm.load(xml=xml, domain=domain)
-        steps = periods * arm.n_substeps
-        c = time_c(arm, c_batch, periods)
-        c_sim_rate = c["batch"] * args.seconds / c["wall_s"]
-        for batch in args.batches:
-            r = time_mjx(arm, batch, periods)
-            sim_rate = r["batch"] * args.seconds / r["wall_s"]
-            rows.append(
-                {
-                    "model": args.label,
-                    "overrides": overrides,
-                    "domain": domain,
-                    "segments": arm.mj_model.nbody - 1,
-                    "timestep_s": arm.timestep_s,
-                    "batch": r["batch"],
-                    "sim_seconds": args.seconds,
-                    "mjx_compile_s": round(r["compile_s"], 2),
-                    "mjx_wall_s": round(r["wall_s"], 3),
-                    "mjx_sim_s_per_s": round(sim_rate, 1),
-                    "mjx_steps_per_s": round(r["batch"] * steps / r["wall_s"]),
-                    "c_batch": c["batch"],
-                    "c_sim_s_per_s": round(c_sim_rate, 1),
-                    "c_steps_per_s": round(c["batch"] * steps / c["wall_s"]),
-                    "mjx_over_c": round(sim_rate / c_sim_rate, 2),
-                }
-            )
-            print(rows[-1], flush=True)
-
-    args.out.mkdir(parents=True, exist_ok=True)
-    tag = "" if not overrides else "_" + "_".join(f"{k}-{v}" for k, v in overrides.items())
-    (args.out / f"throughput{tag}.json").write_text(
-        json.dumps({"machine": machine, "rows": rows}, indent=1)
+    tag_parts = [f"{k}-{v}" for k, v in overrides.items()]
+    if args.segments:  # not the counts themselves: runs of some counts append to one table
+        tag_parts.append("segments")
+    tag = "".join("_" + p for p in tag_parts)
+    command = (
+        ""
+        if args.report_only
+        else "python -m bench.throughput " + shlex.join(argv if argv is not None else sys.argv[1:])
     )
-    header = "| domain | batch | MJX compile s | MJX sim s/s | MJX steps/s | C sim s/s | MJX / C |"
-    lines = [
-        "# Rollout throughput",
-        "",
-        f"Machine: {machine['accelerator']} ({machine['backend']}), CPU {machine['cpu']} x"
-        f" {cores} cores, jax {machine['jax']}. Model: models/softarm.xml, "
-        f"{args.seconds:g} simulated s per rollout, physics steps at the model's timestep.",
-        f"Model variant: {args.label} {overrides or ''}",
-        f"MuJoCo C: `mujoco.rollout`, {cores} threads, batch {c_batch}.",
-        "Command: `python -m bench.throughput "
-        + " ".join(argv or __import__("sys").argv[1:])
-        + "`",
-        "",
-        header,
-        "|---|---|---|---|---|---|---|",
-    ]
-    for r in rows:
-        lines.append(
-            f"| {r['domain']} | {r['batch']} | {r['mjx_compile_s']} | {r['mjx_sim_s_per_s']:.0f} |"
-            f" {r['mjx_steps_per_s']:.3g} | {r['c_sim_s_per_s']:.0f} | {r['mjx_over_c']} |"
-        )
-    (args.out / f"throughput{tag}.md").write_text("\n".join(lines) + "\n")
-    print("\n".join(lines))
+    results = Results(args.out, tag, machine, command, args.append or args.report_only)
+    for path in args.merge:
+        results.merge(path)
+    if args.report_only:
+        results.write()
+        print(results.markdown())
+        return
+
+    for n in segments:
+        params = dataclasses.replace(mjx_arm.ArmParams(), **overrides)
+        if n is not None:
+            params = dataclasses.replace(params, n_segments=n)
+        xml = mjx_arm.generate_xml(params)
+        arms = {d: mjx_arm.load(xml=xml, domain=d) for d in args.domains}
+        first = arms[args.domains[0]]
+        n_seg = params.n_segments
+        check_commands = programs(n_check, periods)
+        c_rate, c_steps = {}, {}
+        for d, arm in arms.items():
+            c = time_c(arm, c_batch, periods)
+            c_rate[d] = c["batch"] * args.seconds / c["wall_s"]
+            c_steps[d] = c["batch"] * periods * arm.n_substeps / c["wall_s"]
+            results.poses[f"seg{n_seg}_{d}_c"] = arm.rollout(check_commands, backend="c")
+            print(f"segments {n_seg} {d}: MuJoCo C {c_rate[d]:.0f} sim s/s", flush=True)
+        for impl in impls:
+            models = {d: device_model(arm, impl) for d, arm in arms.items()}
+            fn = batched_rollout(first, impl)
+            for bi, batch in enumerate(sorted(args.batches)):
+                commands, padded = sharded_commands(batch, periods)
+                compiled, compiled_for, compile_s = None, None, 0.0
+                for d, arm in arms.items():
+                    rest = (jnp.asarray(arm.rest_qpos), jnp.asarray(arm.rest_qvel))
+                    shared = compiled is not None and same_signature(compiled_for, models[d])
+                    if not shared:
+                        start = time.perf_counter()
+                        compiled = fn.lower(models[d], commands, *rest).compile()
+                        compile_s = time.perf_counter() - start
+                        compiled_for = models[d]
+                    r = time_mjx(compiled, models[d], commands, rest, n_check if bi == 0 else 0)
+                    steps = periods * arm.n_substeps
+                    sim_rate = padded * args.seconds / r["wall_s"]
+                    row = {
+                        "model": args.label,
+                        "overrides": overrides,
+                        "impl": impl,
+                        "domain": d,
+                        "segments": n_seg,
+                        "nv": int(arm.mj_model.nv),
+                        "model_hash": arm.model_hash,
+                        "timestep_s": arm.timestep_s,
+                        "batch": padded,
+                        "sim_seconds": args.seconds,
+                        "mjx_compile_s": round(compile_s, 2),
+                        "compile_shared": shared,
+                        "mjx_first_call_s": round(r["first_call_s"], 3),
+                        "mjx_wall_s": round(r["wall_s"], 3),
+                        "mjx_sim_s_per_s": round(sim_rate, 1),
+                        "mjx_steps_per_s": round(padded * steps / r["wall_s"]),
+                        "c_batch": c_batch,
+                        "c_sim_s_per_s": round(c_rate[d], 1),
+                        "c_steps_per_s": round(c_steps[d]),
+                        "mjx_over_c": round(sim_rate / c_rate[d], 2),
+                    }
+                    print(row, flush=True)
+                    if bi == 0:
+                        key = f"seg{n_seg}_{d}_{impl}"
+                        results.poses[key] = r["poses"]
+                        check = {
+                            "segments": n_seg,
+                            "domain": d,
+                            "impl": impl,
+                            "programs": n_check,
+                            "vs_c": pose_diff(r["poses"], results.poses[f"seg{n_seg}_{d}_c"]),
+                        }
+                        jax_poses = results.poses.get(f"seg{n_seg}_{d}_jax")
+                        if impl == "warp" and jax_poses is not None:
+                            if jax_poses.shape == r["poses"].shape:
+                                check["vs_jax"] = pose_diff(r["poses"], jax_poses)
+                        print(check, flush=True)
+                        results.add_check(check, write=False)
+                    results.add_row(row)
+    print(results.markdown())
 
 
 if __name__ == "__main__":

@@ -1,0 +1,111 @@
+#!/usr/bin/env bash
+# Runs ON THE GPU MACHINE (the device tool's `run`), from the repository root of the copy sent there.
+#
+#   bash bench/device/on_device.sh [bench/throughput.py arguments...]
+#
+# Every call: (1) stages what the call carried: .whl/ -> /tmp/whl/, .whl-warpN/ -> /tmp/wp/;
+# (2) installs the mujoco wheels once (sha256 checked) with
+#     pip install --no-index --no-deps --target /tmp/site;
+# (3) once /tmp/wp holds every piece of the warp-lang wheel (the joined file's sha256 matches),
+#     installs it the same way; (4) with arguments, runs `python -m bench.throughput ARGS --append
+#     --out /tmp/bench_out` under `timeout` and puts the results into $OUT: the .md, .json and
+#     check-pose .npz, the log, and everything as bench_out.tar.gz.
+# /tmp stays as a call left it for the next call while the machine is warm (30 s after a call
+# ends), so results of successive calls accumulate in /tmp/bench_out (one table) and the warp
+# pieces add up in /tmp/wp. A fresh machine starts bare: then start again from call 1.
+#
+# Prepare HERE first: `bash bench/device/fetch_wheels.sh` (writes the git-ignored .whl/,
+# .whl-warp1/ ... .whl-warp4/; it prints the piece count). A call sends the working tree (~25 MiB)
+# plus its carried paths, 64 MiB in all, hence one folder per call. Exact sequence of `run` calls
+# (kind nvidia-h100-x1, or nvidia-h200; calls 2-5 must each start within the 30 s warm window):
+#
+#   1. carry [".whl"], timeout_s 600:
+#        bash bench/device/on_device.sh --impl jax --segments 10 20 30 --batches 8192 32768 --seconds 2
+#      (installs mujoco; MuJoCo C and MJX-JAX for every segment count; results come back)
+#   2. carry [".whl-warp1"], timeout_s 120:   bash bench/device/on_device.sh
+#   3. carry [".whl-warp2"], timeout_s 120:   bash bench/device/on_device.sh
+#   4. carry [".whl-warp3"], timeout_s 120:   bash bench/device/on_device.sh
+#   5. carry [".whl-warp4"], timeout_s 600:
+#        bash bench/device/on_device.sh --impl warp --segments 10 20 30 --batches 8192 32768 --seconds 2
+#      (joins and installs warp-lang; MJX-Warp, checked against the MJX-JAX poses of call 1;
+#      the returned throughput_segments.{md,json} hold both implementations)
+#
+# If the machine was lost between calls (the script then reports missing pieces or no mujoco),
+# carry ".whl" together with no piece and begin again. To merge results of two machines' runs
+# here: python -m bench.throughput --report-only --segments 10 20 30 --out DIR --merge OTHER.json
+# BENCH_TIMEOUT_S (default 540) bounds the benchmark so that the results still reach $OUT; the
+# tables are rewritten after every row, so a run stopped part-way returns what it measured, and a
+# later call (--segments of what is missing) adds the rest to the same table. Untried on a GPU as
+# of this commit (no machine was lent): MJX-JAX compile times at 20 and 30 segments are unknown
+# (30-50 s per program at 10), so call 1 may need splitting, e.g. --segments 10 20, then 30.
+set -uo pipefail
+
+TMP=${DEVICE_TMP:-/tmp} # overridable only to rehearse the calls on another machine
+SITE=$TMP/site
+WHL=$TMP/whl
+WP=$TMP/wp
+STATE=$TMP/bench_out
+OUT=${OUT:-$TMP/out}
+PY=${PY:-python3}
+mkdir -p "$SITE" "$WHL" "$WP" "$STATE" "$OUT"
+export PYTHONPATH="$SITE:$PWD"
+export MUJOCO_GL=disable # no rendering here; keeps mujoco from loading EGL/OpenGL
+export PYTHONUNBUFFERED=1
+
+# (1) Stage what this call carried.
+if compgen -G ".whl/*.whl" >/dev/null; then
+  cp -f .whl/* "$WHL/"
+  echo "staged $(ls .whl/*.whl | wc -l) mujoco wheels"
+fi
+for dir in .whl-warp[0-9]*; do
+  [[ -d $dir ]] || continue
+  cp -f "$dir"/* "$WP/"
+  echo "staged $(ls "$dir" | grep -c part-) warp piece(s) from $dir"
+done
+
+# (2) mujoco, mujoco-mjx and their missing needs.
+if ! $PY -c "import mujoco.mjx" >/dev/null 2>&1; then
+  if compgen -G "$WHL/*.whl" >/dev/null; then
+    (cd "$WHL" && sha256sum -c --quiet SHA256SUMS) || { echo "mujoco wheels: bad sha256"; exit 1; }
+    $PY -m pip install -q --no-index --no-deps --no-compile --no-cache-dir --upgrade \
+      --target "$SITE" "$WHL"/*.whl || exit 1
+    echo "installed: $(cd "$WHL" && ls -- *.whl | tr '\n' ' ')"
+  else
+    echo "mujoco is not installed and no .whl was carried (machine fresh?): carry .whl"
+  fi
+fi
+
+# (3) warp-lang, once all pieces are here.
+if ! $PY -c "import warp" >/dev/null 2>&1 && [[ -f $WP/SHA256SUMS ]]; then
+  wheel=$(awk '{print $2}' "$WP/SHA256SUMS")
+  echo "warp pieces in $WP: $(cd "$WP" && ls -- *.part-* 2>/dev/null | sed 's/.*part-//' | tr '\n' ' ')"
+  cat "$WP/$wheel".part-* >"$WP/$wheel"
+  if (cd "$WP" && sha256sum -c --quiet SHA256SUMS >/dev/null 2>&1); then
+    $PY -m pip install -q --no-index --no-deps --no-compile --no-cache-dir --upgrade \
+      --target "$SITE" "$WP/$wheel" || exit 1
+    rm -f "$WP/$wheel"
+    echo "installed: $wheel"
+  else
+    rm -f "$WP/$wheel"
+    echo "warp wheel not complete yet (sha256 of the joined pieces does not match)"
+  fi
+fi
+$PY - <<'EOF'
+from importlib import metadata
+for d in ("jax", "jaxlib", "mujoco", "mujoco-mjx", "warp-lang", "numpy"):
+    try:
+        print(f"  {d} {metadata.version(d)}")
+    except metadata.PackageNotFoundError:
+        print(f"  {d} -")
+EOF
+
+# (4) The benchmark.
+(($# == 0)) && exit 0
+nvidia-smi --query-gpu=name,memory.total,driver_version --format=csv,noheader || true
+timeout -k 15 "${BENCH_TIMEOUT_S:-540}" $PY -m bench.throughput "$@" --append --out "$STATE" 2>&1 |
+  tee -a "$STATE/log.txt"
+rc=$?
+cp -f "$STATE"/*.md "$STATE"/*.json "$STATE"/*.npz "$STATE"/log.txt "$OUT/" 2>/dev/null
+tar -czf "$OUT/bench_out.tar.gz" -C "$(dirname "$STATE")" "$(basename "$STATE")"
+echo "benchmark exit status $rc; in \$OUT: $(ls "$OUT" | tr '\n' ' ')"
+exit $rc
