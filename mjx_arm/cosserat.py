@@ -597,6 +597,35 @@ def rollout_fn(params: CosseratParams = CosseratParams()):
     return functools.partial(_rollout_single, rod, params.n_substeps, valve.ValveParams(), rest)
 
 
+@functools.lru_cache(maxsize=8)
+def _tip_each_step_fn(params: CosseratParams):
+    rod = _make_rod(params)
+
+    def run(rest, pressures):
+        zero = jnp.zeros(3, pressures.dtype)
+
+        def body(st, p):
+            st = _step(rod, st, p, zero, zero, rod.trans_damp, rod.rot_damp)
+            return st, st.x[-1]
+
+        return jax.lax.scan(body, rest, pressures)[1]
+
+    return jax.jit(run)
+
+
+def tip_each_step(pressures_bar, params: CosseratParams = CosseratParams()) -> np.ndarray:
+    """Tip node positions [N, 3] (m) after each physics step, from rest, under chamber pressures
+    [N, 3] (bar) given per physics step (no valve: the caller shapes them), for step responses
+    sampled finer than the control period."""
+    rest = rest_state(params)
+    with jax.enable_x64(True):
+        tips = _tip_each_step_fn(params)(
+            RodState(*(jnp.asarray(a, jnp.float64) for a in rest)),
+            jnp.asarray(pressures_bar, jnp.float64),
+        )
+        return np.asarray(tips)
+
+
 def rollout(pressures_bar, params: CosseratParams = CosseratParams()) -> np.ndarray:
     """Simulates pressure programs from rest and returns the tip pose after each command.
 

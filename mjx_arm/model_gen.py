@@ -90,6 +90,12 @@ class ArmParams:
     `timestep_s`; the overdamped bending response is set by stiffness and drag, not inertia]."""
     stretch_armature_scale: float = 4.0
     """Slide-joint armature as a multiple of the segment mass [choice: as above, axial mode]."""
+    symmetric_bend: bool | None = None
+    """Split each segment's x bending hinge in two halves around the y hinge (x/2, y, x/2)
+    [choice: two hinges in a row, x then y, turn by Rx(a) Ry(b) = exp(a x + b y + ab/2 z + ...),
+    a spurious twist of ab/2 per joint that rotates the bending plane of a chamber off the x and
+    y axes (70 mrad at 3.5 bar on 10 segments); the symmetric product has no second-order term].
+    None: on for the I-Support section, off for the solid one, whose frozen model has the pair."""
     euler_implicit_damping: bool = False
     """Keep MuJoCo's implicit joint-damping pass in the Euler step [choice: the joints carry no
     damping (the reference rod has no material damping; the medium does all of it), so the
@@ -99,6 +105,8 @@ class ArmParams:
     def __post_init__(self):
         if self.section not in sections.SECTIONS:
             raise ValueError(f"unknown section {self.section!r}; known: {sections.SECTIONS}")
+        if self.symmetric_bend is None:
+            object.__setattr__(self, "symmetric_bend", self.section == "isupport")
         missing = [n for n in fitted.FIT_NAMES if getattr(self, n) is None]
         if missing:
             stored = fitted.load_fit(fitted.FIT_PATHS[self.section])
@@ -267,6 +275,14 @@ def chamber_span_weights(params: ArmParams) -> list[tuple[int, float, float]]:
     return weights
 
 
+def bend_hinges(params: ArmParams) -> list[tuple[str, str, float]]:
+    """The bending hinges at the top of a segment, in order: (name suffix, axis, stiffness
+    factor). Split x halves are twice as stiff, so in series they bend as one."""
+    if params.symmetric_bend:
+        return [("xa", "1 0 0", 2.0), ("y", "0 1 0", 1.0), ("xb", "1 0 0", 2.0)]
+    return [("x", "1 0 0", 1.0), ("y", "0 1 0", 1.0)]
+
+
 def chamber_offsets_m(params: ArmParams) -> list[tuple[float, float]]:
     """(x, y) of each chamber's centre in a segment's frame (m), at 0, 120, 240 degrees."""
     angles = [2.0 * math.pi * k / 3.0 for k in range(3)]
@@ -286,6 +302,11 @@ def generate_xml(params: ArmParams = ArmParams()) -> str:
     weights = chamber_span_weights(p)
     sec = p.cross_section
     section_text = SECTION_TEXT[p.section]
+    bend_text = (
+        "x split in halves of twice the stiffness around y (x/2, y, x/2: no spurious twist);"
+        if p.symmetric_bend
+        else "x then y;"
+    )
 
     header = f"""<!--
   Soft pneumatic arm (I-Support module) as a chain of {p.n_segments} rigid segments.
@@ -303,7 +324,8 @@ def generate_xml(params: ArmParams = ArmParams()) -> str:
     J = {_f(sec.polar_moment_m4)} m^4.
   Per segment (l = {_f(seg)} m, m = {_f(p.segment_mass_kg)} kg spread like the section's area),
   stiffness scaled by {_f(p.stiffness_scale)} [fit]:
-    bending hinges (x, y) s*E*I/l = {_f(p.bend_stiffness_nm_per_rad)} N m/rad,
+    bending hinges s*E*I/l = {_f(p.bend_stiffness_nm_per_rad)} N m/rad,
+      {bend_text}
     twist hinge (z) s*G*J/l = {_f(p.twist_stiffness_nm_per_rad)} N m/rad;
       the base joints stand for the half segment at the clamp, so twice these: this places each
       joint's compliance at the centroid of the rod it lumps and makes the tip deflection under
@@ -389,10 +411,10 @@ def generate_xml(params: ArmParams = ArmParams()) -> str:
         lines.append(f'{indent}<body name="seg_{i}" pos="{pos}" childclass="segment">')
         inner = indent + "  "
         base = i == 0
-        bend = _f((2.0 if base else 1.0) * p.bend_stiffness_nm_per_rad)
+        bend = (2.0 if base else 1.0) * p.bend_stiffness_nm_per_rad
         twist = _f((2.0 if base else 1.0) * p.twist_stiffness_nm_per_rad)
-        for axis, vector, stiffness in (("x", "1 0 0", bend), ("y", "0 1 0", bend)):
-            stiff = f' stiffness="{stiffness}"' if base else ""
+        for axis, vector, factor in bend_hinges(p):
+            stiff = f' stiffness="{_f(factor * bend)}"' if base or factor != 1.0 else ""
             lines.append(
                 f'{inner}<joint name="bend_{i}_{axis}" class="bend" axis="{vector}"{stiff}/>'
             )
@@ -417,12 +439,16 @@ def generate_xml(params: ArmParams = ArmParams()) -> str:
         lines.append(f"{indent}</body>")
     lines.append("  </worldbody>")
 
-    # A fibre at (x, y) lengthens by q_stretch - y q_bend_x + x q_bend_y over one joint.
+    # A fibre at (x, y) lengthens by q_stretch - y q_bend_x + x q_bend_y over one joint (each
+    # half of a split x hinge carries the whole -y: the halves turn by half each).
     lines.append("  <tendon>")
     for k, (x, y) in enumerate(offsets):
         lines.append(f'    <fixed name="chamber_{k}">')
         for i, stretch, bend in weights:
-            terms = (("stretch", stretch), ("bend_{i}_x", -y * bend), ("bend_{i}_y", x * bend))
+            fibre = {"x": -y * bend, "xa": -y * bend, "xb": -y * bend, "y": x * bend}
+            terms = [("stretch", stretch)] + [
+                (f"bend_{{i}}_{axis}", fibre[axis]) for axis, _, _ in bend_hinges(p)
+            ]
             for joint, coef in terms:
                 if abs(coef) > 1e-12:
                     name = f"stretch_{i}" if joint == "stretch" else joint.format(i=i)

@@ -86,3 +86,32 @@ def test_a_corrupt_fit_file_is_refused_and_a_missing_one_means_unfitted(tmp_path
     path.write_text("{not json")
     with pytest.raises(ValueError, match="not a fit result"):
         fitted.load_fit(path)
+
+
+def test_fidelity_cli_writes_nothing_unless_told(tmp_path, capsys):
+    from mjx_arm import fidelity
+
+    with pytest.raises(SystemExit) as err:
+        fidelity.main([])
+    assert err.value.code == 2 and "--out" in capsys.readouterr().err
+    (tmp_path / "file").write_text("")
+    with pytest.raises(SystemExit):
+        fidelity.main(["--out", str(tmp_path / "file")])
+
+
+def test_workspace_measures_ranges_and_the_widest_turn():
+    from mjx_arm.fidelity import workspace
+
+    rest = np.array([0.0, 0.0, -0.2, 0.0, 0.0, -1.0])
+    tilt = np.radians(30.0)
+    poses = np.array(
+        [
+            [0.05, 0.0, -0.19, np.sin(tilt), 0.0, -np.cos(tilt)],
+            [-0.03, 0.02, -0.19, -np.sin(tilt), 0.0, -np.cos(tilt)],
+            rest,
+        ]
+    )
+    w = workspace(poses, rest)
+    assert w["x_range_m"] == pytest.approx(0.08) and w["y_range_m"] == pytest.approx(0.02)
+    assert w["max_tilt_rad"] == pytest.approx(tilt)
+    assert w["orientation_range_rad"] == pytest.approx(2 * tilt)
