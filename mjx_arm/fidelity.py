@@ -571,7 +571,7 @@ def to_markdown(results: dict) -> str:
     for domain, s in results["stability"].items():
         lines.append(
             f"| {domain} | {s['finite']} | {s['mujoco_warnings'] or 'none'} |"
-            f" {1e3 * s['mjx_vs_c_max_tip_m']:.3f} | {s['mjx_vs_c_max_d3']:.1e} |"
+            f" {1e3 * s['mjx_vs_c_max_tip_m']:.1e} | {s['mjx_vs_c_max_d3']:.1e} |"
             f" {100 * s['tip_range_m']:.1f} |"
         )
     lines += [
@@ -600,8 +600,8 @@ def to_markdown(results: dict) -> str:
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(
         prog="python -m mjx_arm.fidelity",
-        description=__doc__.splitlines()[0]
-        + " Writes fidelity.md and fidelity.json into --out (the committed report: --out results).",
+        description=__doc__.splitlines()[0].rstrip(".")
+        + ". Writes fidelity.md and .json into --out (the committed report: --out results).",
         formatter_class=argparse.ArgumentDefaultsHelpFormatter,
     )
     parser.add_argument("--out", type=Path, required=True, help="folder for the report")

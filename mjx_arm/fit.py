@@ -42,6 +42,7 @@ from pathlib import Path
 
 import mujoco.minimize
 import numpy as np
+from tqdm import tqdm
 
 import mjx_arm
 from mjx_arm import constants, cosserat, domains, fitted
@@ -149,21 +150,24 @@ def rms_errors(poses: dict[str, np.ndarray], data: dict[str, dict]) -> dict[str,
     return out
 
 
-def fit(data: dict[str, dict], max_iter: int = 30, log=print) -> dict:
+def fit(data: dict[str, dict], max_iter: int = 30, log=print, progress: bool = False) -> dict:
     """Runs the least-squares fit from the physical values; returns the JSON-ready result.
 
     Args:
       data: `reference_data()`'s programs and target poses per fit domain.
       max_iter: Levenberg-Marquardt iterations at most.
       log: receives the optimiser's iteration report.
+      progress: show a progress bar over the residual evaluations.
     """
     x0 = initial_log()
     evaluations = 0
+    bar = tqdm(desc="fit: rollouts of both domains", unit="evaluation", disable=not progress)
 
     def residual(x: np.ndarray) -> np.ndarray:
         nonlocal evaluations
         columns = x.reshape(len(NAMES), -1)
         evaluations += columns.shape[1]
+        bar.update(columns.shape[1])
         out = np.stack([residual_one(columns[:, j], data) for j in range(columns.shape[1])], axis=1)
         return out if x.ndim == 2 else out[:, 0]
 
@@ -181,6 +185,7 @@ def fit(data: dict[str, dict], max_iter: int = 30, log=print) -> dict:
         gtol=1e-10,
     )
     wall = time.perf_counter() - t0
+    bar.close()
     log(report.getvalue().rstrip())
     before = rms_errors(simulate(params_from_log(x0), data), data)
     after = rms_errors(simulate(params_from_log(x), data), data)
@@ -227,7 +232,7 @@ def write_committed_fit(result: dict) -> None:
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(
         prog="python -m mjx_arm.fit",
-        description=__doc__.splitlines()[0]
+        description=__doc__.splitlines()[0].rstrip(".")
         + ". Writes only --out, unless --write-model makes the fit the committed one.",
         formatter_class=argparse.ArgumentDefaultsHelpFormatter,
     )
@@ -252,7 +257,7 @@ def main(argv: list[str] | None = None) -> int:
     data = reference_data()
     seconds = time.perf_counter() - t0
     print(f"reference rod data: {len(FIT_SEEDS)} x {FIT_SECONDS:g} s per domain in {seconds:.1f} s")
-    result = fit(data, args.max_iter)
+    result = fit(data, args.max_iter, progress=True)
     for name in NAMES:
         print(f"{name:30s} {result['initial'][name]:10.4g} -> {result['fitted'][name]:10.4g}")
     for domain in FIT_DOMAINS:

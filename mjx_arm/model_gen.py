@@ -90,12 +90,15 @@ class ArmParams:
     `timestep_s`; the overdamped bending response is set by stiffness and drag, not inertia]."""
     stretch_armature_scale: float = 4.0
     """Slide-joint armature as a multiple of the segment mass [choice: as above, axial mode]."""
-    symmetric_bend: bool | None = None
-    """Split each segment's x bending hinge in two halves around the y hinge (x/2, y, x/2)
-    [choice: two hinges in a row, x then y, turn by Rx(a) Ry(b) = exp(a x + b y + ab/2 z + ...),
-    a spurious twist of ab/2 per joint that rotates the bending plane of a chamber off the x and
-    y axes (70 mrad at 3.5 bar on 10 segments); the symmetric product has no second-order term].
-    None: on for the I-Support section, off for the solid one, whose frozen model has the pair."""
+    alternate_bend: bool | None = None
+    """Alternate the order of each segment's two bending hinges, x then y on even segments, y
+    then x on odd ones [choice: two hinges in a row turn by Rx(a) Ry(b) = exp(a x + b y + ab/2 z
+    + ...), a spurious twist of ab/2 per joint that accumulates along the arm and turns the
+    bending plane of chambers 1 and 2 (70 mrad at 3.5 bar on 10 segments); reversing the order
+    flips its sign, so neighbours cancel it. A third hinge (x/2, y, x/2) cancels it in each
+    segment too, but made MJX's compile on the CPU take minutes]. None: on for the I-Support
+    section, off for the solid one, whose frozen model keeps x then y throughout.
+    """
     euler_implicit_damping: bool = False
     """Keep MuJoCo's implicit joint-damping pass in the Euler step [choice: the joints carry no
     damping (the reference rod has no material damping; the medium does all of it), so the
@@ -105,8 +108,8 @@ class ArmParams:
     def __post_init__(self):
         if self.section not in sections.SECTIONS:
             raise ValueError(f"unknown section {self.section!r}; known: {sections.SECTIONS}")
-        if self.symmetric_bend is None:
-            object.__setattr__(self, "symmetric_bend", self.section == "isupport")
+        if self.alternate_bend is None:
+            object.__setattr__(self, "alternate_bend", self.section == "isupport")
         missing = [n for n in fitted.FIT_NAMES if getattr(self, n) is None]
         if missing:
             stored = fitted.load_fit(fitted.FIT_PATHS[self.section])
@@ -275,12 +278,10 @@ def chamber_span_weights(params: ArmParams) -> list[tuple[int, float, float]]:
     return weights
 
 
-def bend_hinges(params: ArmParams) -> list[tuple[str, str, float]]:
-    """The bending hinges at the top of a segment, in order: (name suffix, axis, stiffness
-    factor). Split x halves are twice as stiff, so in series they bend as one."""
-    if params.symmetric_bend:
-        return [("xa", "1 0 0", 2.0), ("y", "0 1 0", 1.0), ("xb", "1 0 0", 2.0)]
-    return [("x", "1 0 0", 1.0), ("y", "0 1 0", 1.0)]
+def bend_hinges(params: ArmParams, segment: int) -> list[tuple[str, str]]:
+    """The bending hinges at the top of `segment`, in order: (name suffix, axis)."""
+    hinges = [("x", "1 0 0"), ("y", "0 1 0")]
+    return hinges[::-1] if params.alternate_bend and segment % 2 else hinges
 
 
 def chamber_offsets_m(params: ArmParams) -> list[tuple[float, float]]:
@@ -303,8 +304,8 @@ def generate_xml(params: ArmParams = ArmParams()) -> str:
     sec = p.cross_section
     section_text = SECTION_TEXT[p.section]
     bend_text = (
-        "x split in halves of twice the stiffness around y (x/2, y, x/2: no spurious twist);"
-        if p.symmetric_bend
+        "x then y on even segments, y then x on odd ones (no accumulated twist);"
+        if p.alternate_bend
         else "x then y;"
     )
 
@@ -411,10 +412,10 @@ def generate_xml(params: ArmParams = ArmParams()) -> str:
         lines.append(f'{indent}<body name="seg_{i}" pos="{pos}" childclass="segment">')
         inner = indent + "  "
         base = i == 0
-        bend = (2.0 if base else 1.0) * p.bend_stiffness_nm_per_rad
+        bend = (2.0 if base else 1.0) * p.bend_stiffness_nm_per_rad  # the clamp's half segment
         twist = _f((2.0 if base else 1.0) * p.twist_stiffness_nm_per_rad)
-        for axis, vector, factor in bend_hinges(p):
-            stiff = f' stiffness="{_f(factor * bend)}"' if base or factor != 1.0 else ""
+        for axis, vector in bend_hinges(p, i):
+            stiff = f' stiffness="{_f(bend)}"' if base else ""
             lines.append(
                 f'{inner}<joint name="bend_{i}_{axis}" class="bend" axis="{vector}"{stiff}/>'
             )
@@ -439,15 +440,14 @@ def generate_xml(params: ArmParams = ArmParams()) -> str:
         lines.append(f"{indent}</body>")
     lines.append("  </worldbody>")
 
-    # A fibre at (x, y) lengthens by q_stretch - y q_bend_x + x q_bend_y over one joint (each
-    # half of a split x hinge carries the whole -y: the halves turn by half each).
+    # A fibre at (x, y) lengthens by q_stretch - y q_bend_x + x q_bend_y over one joint.
     lines.append("  <tendon>")
     for k, (x, y) in enumerate(offsets):
         lines.append(f'    <fixed name="chamber_{k}">')
         for i, stretch, bend in weights:
-            fibre = {"x": -y * bend, "xa": -y * bend, "xb": -y * bend, "y": x * bend}
+            fibre = {"x": -y * bend, "y": x * bend}
             terms = [("stretch", stretch)] + [
-                (f"bend_{{i}}_{axis}", fibre[axis]) for axis, _, _ in bend_hinges(p)
+                (f"bend_{{i}}_{axis}", fibre[axis]) for axis, _ in bend_hinges(p, i)
             ]
             for joint, coef in terms:
                 if abs(coef) > 1e-12:
@@ -470,12 +470,28 @@ def generate_xml(params: ArmParams = ArmParams()) -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--out", type=Path, default=constants.DEFAULT_MODEL_PATH)
-    parser.add_argument("--segments", type=int, default=None, help="override n_segments")
+    parser = argparse.ArgumentParser(
+        prog="python -m mjx_arm.model_gen",
+        description=__doc__.splitlines()[0].rstrip(".")
+        + ". By default it rewrites the committed models/softarm.xml, and nothing else.",
+        formatter_class=argparse.ArgumentDefaultsHelpFormatter,
+    )
+    parser.add_argument(
+        "--out", type=Path, default=constants.DEFAULT_MODEL_PATH, help="the MJCF file to write"
+    )
+    parser.add_argument(
+        "--segments", type=int, default=None, help="override n_segments (default: ArmParams')"
+    )
+    parser.add_argument(
+        "--section", choices=sections.SECTIONS, default="isupport", help="the body's cross-section"
+    )
     parser.add_argument("--check", action="store_true", help="only compare with --out")
     args = parser.parse_args(argv)
-    params = ArmParams()
+    if args.segments is not None and args.segments < 2:
+        parser.error("--segments must be >= 2")
+    if args.out.is_dir():
+        parser.error(f"--out {args.out} is a folder, not a file")
+    params = ArmParams(section=args.section)
     if args.segments is not None:
         params = dataclasses.replace(params, n_segments=args.segments)
     text = generate_xml(params)

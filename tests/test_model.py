@@ -109,3 +109,19 @@ def test_chamber_force_bends_a_free_chain_into_the_rods_arc():
     assert angle == pytest.approx(slope, rel=0.02)
     # Chamber 0 sits at +x: lengthening it bends the arm toward -x.
     assert d.site_xpos[m.site(constants.TIP_SITE).id][0] < -0.005
+
+
+@pytest.mark.parametrize("alternate", [True, False])
+def test_alternating_hinge_order_keeps_a_chamber_in_its_bending_plane(alternate):
+    # Chamber 1 (120 deg) bends the arm about a skewed axis; x-then-y hinges everywhere add a
+    # twist of ab/2 per joint that turns the bending plane, alternating the order cancels it.
+    params = dataclasses.replace(ArmParams(), alternate_bend=alternate)
+    arm = mjx_arm.load(xml=generate_xml(params))
+    tip = arm.rollout(np.tile([0.2, 3.5, 0.2], (150, 1)), backend="c")[-1]
+    away = -np.array([np.cos(2 * np.pi / 3), np.sin(2 * np.pi / 3)])
+    direction = tip[:2] / np.linalg.norm(tip[:2])
+    off_plane = abs(away[0] * direction[1] - away[1] * direction[0])  # sine of the angle
+    if alternate:
+        assert off_plane < 0.005
+    else:
+        assert off_plane > 0.03
