@@ -28,6 +28,7 @@ import operator
 import os
 import re
 import textwrap
+import warnings
 from pathlib import Path
 from typing import Any, NamedTuple
 
@@ -42,7 +43,6 @@ from jax.sharding import PartitionSpec as P
 from ccgan import checkpoint, losses
 from ccgan.data import PRESSURE_DIM, TranslationData, read_domain
 from ccgan.forward import ForwardConfig
-from ccgan.fused_feedback import fused_weights, make_forward_stretched_fused
 from ccgan.models import (
     Critic,
     ForwardModel,
@@ -54,7 +54,10 @@ from ccgan.models import (
 # ---------------------------------------------------------------------------------- settings
 
 #: The feedback rollouts `TrainConfig.feedback_impl` can name.
-FEEDBACK_IMPLS = ("auto", "cell", "lean", "lean_reduce", "pallas")
+FEEDBACK_IMPLS = ("auto", "cell", "lean", "lean_reduce")
+#: Rollouts that were options once and lost (docs/benchmarks.md, "Retired experiments"). A
+#: config naming one is refused; a stored run naming one resumes with this run's rollout.
+RETIRED_FEEDBACK_IMPLS = ("pallas",)
 
 
 class ConfigError(ValueError):
@@ -350,11 +353,10 @@ class TrainConfig:
     gen_unroll: int = 10
     #: F_c periods per loop iteration in the feedback rollout and the choice of k.
     feedback_unroll: int = 25
-    #: The feedback rollout: "auto" is "lean_reduce" on a GPU, "lean" elsewhere. "lean",
-    #: "lean_reduce" and "cell" are `models.forward_stretched`'s; "pallas" runs two fused Triton
-    #: kernels (`ccgan.fused_feedback`; slower on the GPU: bench/feedback.py). "lean_reduce"
-    #: trains 12% faster on an H200 and is 8x slower on a 2-core CPU, as measured in
-    #: bench/results/h200/profile_step_dedup.md and bench/results/cpu/train_feedback_impls.md.
+    #: The feedback rollout, one of `models.forward_stretched`'s ("cell", "lean",
+    #: "lean_reduce"), or "auto": "lean_reduce" on a GPU, where XLA fuses its multiply-and-sum
+    #: products into fewer kernels, "lean" elsewhere, where those products are slower than a
+    #: matrix product (docs/benchmarks.md).
     feedback_impl: str = "auto"
     #: WCGAN-GP baseline: one generator and one critic on D_c only, no cycle/identity loss.
     baseline: bool = False
@@ -402,8 +404,14 @@ class TrainConfig:
             below={"beta1": 1, "beta2": 1},
         )
         if self.feedback_impl not in FEEDBACK_IMPLS:
+            retired = (
+                ", a retired rollout (docs/benchmarks.md)"
+                if self.feedback_impl in RETIRED_FEEDBACK_IMPLS
+                else ""
+            )
             raise ConfigError(
-                "feedback_impl", f"must be one of {FEEDBACK_IMPLS}, got {self.feedback_impl!r}"
+                "feedback_impl",
+                f"must be one of {FEEDBACK_IMPLS}, got {self.feedback_impl!r}{retired}",
             )
 
     @property
@@ -496,10 +504,6 @@ def resolved_feedback_impl(impl: str) -> str:
 def _feedback_rollout(config: TrainConfig, fwd: ForwardModel, forward_c_params):
     """`(commands [B, L, 3], pose0 [B, 6], k) -> F_c poses [B, L, 6]`, held k periods each."""
     impl = resolved_feedback_impl(config.feedback_impl)
-    if impl == "pallas":
-        weights = fused_weights(forward_c_params)
-        fused = make_forward_stretched_fused(config.k_max, interpret=jax.default_backend() != "gpu")
-        return lambda commands, pose0, k: fused(weights, commands, pose0, k)
     return lambda commands, pose0, k: forward_stretched(
         fwd,
         forward_c_params,
@@ -819,6 +823,26 @@ def _read_csv(path: Path) -> list[dict]:
     ]
 
 
+def _resume_expectation(ckpt_path: Path, meta: dict) -> dict:
+    """The metadata a stored run must match to be resumed by a run with `meta`.
+
+    A run stored with a retired feedback rollout (`RETIRED_FEEDBACK_IMPLS`) resumes with this
+    run's, with a warning: every rollout computes the same function up to float rounding, so
+    only the stored name differs. The next checkpoint records this run's rollout.
+    """
+    stored = checkpoint.read(ckpt_path)[0].get("config")
+    impl = stored.get("feedback_impl") if isinstance(stored, dict) else None
+    if impl not in RETIRED_FEEDBACK_IMPLS:
+        return meta
+    warnings.warn(
+        f"{ckpt_path} was trained with feedback_impl={impl!r}, a retired rollout"
+        f" (docs/benchmarks.md); resuming with {meta['config']['feedback_impl']!r}, the same"
+        " function up to float rounding",
+        stacklevel=3,
+    )
+    return meta | {"config": meta["config"] | {"feedback_impl": impl}}
+
+
 def train_and_evaluate(
     config: TrainConfig,
     data: TranslationData,
@@ -856,15 +880,17 @@ def train_and_evaluate(
     workdir.mkdir(parents=True, exist_ok=True)
     ckpt_path, csv_path = workdir / "state.ckpt", workdir / "metrics.csv"
     meta = {"config": config.to_dict(), "data": data_fingerprint(data), "seeds": list(seeds)}
+    expect = meta
     if resume and ckpt_path.exists():
-        checkpoint.load(ckpt_path, expect=meta)  # fail fast, before compiling anything
+        expect = _resume_expectation(ckpt_path, meta)
+        checkpoint.load(ckpt_path, expect=expect)  # fail fast, before compiling anything
     trainer = make_trainer(config, data, forward_c_params, forward_model)
     keys = jax.vmap(jax.random.PRNGKey)(jnp.asarray(seeds))
     init_keys, run_keys = jnp.swapaxes(jax.vmap(jax.random.split)(keys), 0, 1)
     state = jax.jit(jax.vmap(trainer.init))(init_keys)
     rows: list[dict] = []
     if resume and ckpt_path.exists():
-        state, _ = checkpoint.load(ckpt_path, target=state, expect=meta)
+        state, _ = checkpoint.load(ckpt_path, target=state, expect=expect)
         done = int(np.asarray(state.epoch)[0])
         rows = [r for r in _read_csv(csv_path) if int(r["epoch"]) <= done]
     done = int(np.asarray(state.epoch)[0])

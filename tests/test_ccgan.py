@@ -148,35 +148,6 @@ def test_stretched_forward_equals_masked_reference_values_and_gradients():
         assert jitted._cache_size() == 1
 
 
-def test_fused_pallas_rollout_matches_in_the_interpreter():
-    """The two Triton kernels (run by the Pallas interpreter on CPU) against the masked scan."""
-    from ccgan import fused_feedback
-
-    fwd = models.ForwardModel(hidden=16, fc=5)  # the kernels need a width 2^n >= 16
-    p = jax.random.uniform(jax.random.PRNGKey(1), (3, 3, 3))
-    pose0 = jax.random.uniform(jax.random.PRNGKey(2), (3, 6))
-    fp = fwd.init(jax.random.PRNGKey(0), pose0[:, None], p[:, :1])
-    weights = jax.random.normal(jax.random.PRNGKey(3), (3, 3, 6))
-    fused = fused_feedback.make_forward_stretched_fused(3, interpret=True)
-    w = fused_feedback.fused_weights(fp)
-    for k in (1, 3):
-        ref = models.forward_stretched_masked(fwd, fp, p, pose0, k, 3)
-        np.testing.assert_allclose(fused(w, p, pose0, jnp.int32(k)), ref, rtol=1e-5, atol=1e-6)
-        g_new = jax.grad(lambda p, x0, k=k: jnp.sum(weights * fused(w, p, x0, k)), (0, 1))(p, pose0)
-        g_ref = jax.grad(
-            lambda p, x0, k=k: jnp.sum(
-                weights * models.forward_stretched_masked(fwd, fp, p, x0, k, 3)
-            ),
-            (0, 1),
-        )(p, pose0)
-        for a, b in zip(g_new, g_ref, strict=True):
-            np.testing.assert_allclose(a, b, rtol=1e-5, atol=1e-6)
-    with pytest.raises(ValueError, match="width"):
-        fused_feedback.fused_weights(
-            models.ForwardModel(hidden=8).init(jax.random.PRNGKey(0), pose0[:, None], p[:, :1])
-        )
-
-
 # ----------------------------------------------------------------------------- losses
 
 
@@ -357,7 +328,12 @@ def test_end_to_end_and_resume_equals_uninterrupted(tiny_setup, tmp_path):
         TINY, data, fparams, tmp_path / "cut", max_chunks=1, **kw
     )
     assert int(half.epoch[0]) == 2 and not _params_equal(half.params, full.params)
-    resumed, rows2 = train_lib.train_and_evaluate(TINY, data, fparams, tmp_path / "cut", **kw)
+    # Stored under a retired feedback rollout: resumed with this run's, with a warning.
+    ckpt = tmp_path / "cut" / "state.ckpt"
+    tree, meta = checkpoint.load(ckpt)
+    checkpoint.save(ckpt, tree, meta | {"config": meta["config"] | {"feedback_impl": "pallas"}})
+    with pytest.warns(UserWarning, match="feedback_impl='pallas', a retired rollout"):
+        resumed, rows2 = train_lib.train_and_evaluate(TINY, data, fparams, tmp_path / "cut", **kw)
     assert _params_equal(resumed.params, full.params)
     assert _params_equal(resumed.opt_gen, full.opt_gen)
     assert [r["epoch"] for r in rows2] == [r["epoch"] for r in rows]
@@ -366,6 +342,12 @@ def test_end_to_end_and_resume_equals_uninterrupted(tiny_setup, tmp_path):
     other = dataclasses.replace(TINY, lambda_cycle=3.0)
     with pytest.raises(checkpoint.CheckpointError, match="lambda_cycle: stored 10.0, this run 3.0"):
         train_lib.train_and_evaluate(other, data, fparams, tmp_path / "cut", **kw)
+
+
+def test_retired_feedback_rollouts_are_refused_by_name():
+    for impl in train_lib.RETIRED_FEEDBACK_IMPLS:
+        with pytest.raises(train_lib.ConfigError, match=f"got '{impl}', a retired rollout"):
+            train_lib.TrainConfig(feedback_impl=impl)
 
 
 def test_corrupt_training_checkpoint_refused(tiny_setup, tmp_path):
