@@ -122,7 +122,7 @@ def forward_stretched(
     k,
     k_max: int,
     unroll: int = 10,
-    impl: str = "cell",
+    impl: str = "lean",
 ):
     """F's open-loop response when each command is held k control periods (time stretching).
 
@@ -132,9 +132,12 @@ def forward_stretched(
     periods run (a while loop of ceil(T * k / unroll) iterations, each `unroll` periods long),
     forward and backward, instead of T * k_max. Under vmap over k the loop runs to the largest k.
 
-    Reverse-mode differentiable in `pressure` and `pose0` through a custom VJP that stores every
-    period's carry and walks them back (F's parameters are frozen: `stop_gradient`). Equal to
-    `forward_stretched_masked` up to float rounding.
+    Reverse-mode differentiable in `pressure` and `pose0` through a custom VJP: the LSTM is
+    written out with its four gates as one matrix product, the forward loop stores every
+    period's activations and a hand-written backward walks them back, so a period costs a few
+    larger kernels instead of many small ones, forward and backward, with no recomputation
+    (F's parameters are frozen: `stop_gradient`). Equal to `forward_stretched_masked` up to
+    float rounding.
 
     Args:
       model: the module.
@@ -142,19 +145,16 @@ def forward_stretched(
       pressure: [B, T, 3] normalised commands.
       pose0: [B, 6] normalised pose before the first command.
       k: hold factor, int (traced or static), 1 <= k <= k_max.
-      k_max: static upper bound on k (sizes the stored carries).
+      k_max: static upper bound on k (sizes the stored activations).
       unroll: periods per loop iteration (fewer, longer iterations; numerics unchanged).
-      impl: "cell" (the Flax cell, backward by `jax.vjp` of each period) or "lean" (the LSTM
-        written out with the gate matrices fused, activations stored by the forward loop and
-        a hand-written backward: fewer, larger kernels per period) or "lean_reduce" (as
-        "lean", each small matrix product written as a broadcast multiply and a sum, which XLA
-        can fuse with the elementwise work around it).
+      impl: "lean" (matrix products) or "lean_reduce" (each small matrix product written as a
+        broadcast multiply and a sum, which XLA can fuse with the elementwise work around it:
+        the faster on a GPU, the slower on a CPU; `ccgan.train.resolved_feedback_impl` picks).
 
     Returns:
       [B, T, 6] normalised poses after each command's k-th period.
     """
     makers = {
-        "cell": _make_stretched,
         "lean": _make_stretched_lean,
         "lean_reduce": functools.partial(_make_stretched_lean, matmul=_multiply_sum),
     }
@@ -170,87 +170,6 @@ def _loop_sizes(pressure, k, k_max: int, unroll: int):
     n = t * k
     padded = -(-t * k_max // unroll) * unroll
     return t, n, (n + unroll - 1) // unroll, padded
-
-
-def _make_stretched(model: ForwardModel, k_max: int, unroll: int):
-    """The custom-VJP function (params, pressure [B, T, 3], pose0 [B, 6], k) -> poses [B, T, 6]."""
-
-    def period(params, carry, p):
-        return _period(model, params, carry, p)
-
-    sizes = functools.partial(_loop_sizes, k_max=k_max, unroll=unroll)
-
-    def run(params, pressure, pose0, k):
-        """Forward loop; returns the poses and the carries [n_pad + 1, ...] (index i = before i)."""
-        t, n, n_iter, padded = sizes(pressure, k)
-        p_tm = jnp.swapaxes(pressure, 0, 1)
-        carry0 = (model.zero_carry(pressure.shape[0]), pose0)
-        buf = jax.tree.map(lambda x: jnp.zeros((padded + 1,) + x.shape, x.dtype), carry0)
-        buf = jax.tree.map(lambda b, x: b.at[0].set(x), buf, carry0)
-
-        def body(state):
-            j, carry, buf = state
-            outs = []
-            for u in range(unroll):
-                i = j * unroll + u
-                new = period(params, carry, p_tm[jnp.clip(i // k, 0, t - 1)])
-                carry = jax.tree.map(lambda a, b, i=i: jnp.where(i < n, a, b), new, carry)
-                outs.append(carry)
-            block = jax.tree.map(lambda *xs: jnp.stack(xs), *outs)
-            buf = jax.tree.map(
-                lambda b, x: jax.lax.dynamic_update_slice_in_dim(b, x, j * unroll + 1, 0),
-                buf,
-                block,
-            )
-            return j + 1, carry, buf
-
-        _, _, buf = jax.lax.while_loop(lambda s: s[0] < n_iter, body, (0, carry0, buf))
-        poses = buf[1][(jnp.arange(t) + 1) * k]  # after period (t + 1) k - 1
-        return jnp.swapaxes(poses, 0, 1), buf
-
-    @jax.custom_vjp
-    def stretched(params, pressure, pose0, k):
-        return run(params, pressure, pose0, k)[0]
-
-    def fwd(params, pressure, pose0, k):
-        poses, buf = run(params, pressure, pose0, k)
-        return poses, (params, pressure, k, buf)
-
-    def bwd(res, ct):
-        params, pressure, k, buf = res
-        t, n, n_iter, _ = sizes(pressure, k)
-        p_tm = jnp.swapaxes(pressure, 0, 1)
-        ct_tm = jnp.swapaxes(ct, 0, 1)
-        g0 = jax.tree.map(lambda b: jnp.zeros_like(b[0]), buf)
-
-        def body(state):
-            j, g, g_p = state
-            before = jax.tree.map(
-                lambda b: jax.lax.dynamic_slice_in_dim(b, j * unroll, unroll, 0), buf
-            )
-            for u in reversed(range(unroll)):
-                i = j * unroll + u
-                live = i < n
-                # The pose after period i is an output when i closes a command.
-                out_t = jnp.clip((i + 1) // k - 1, 0, t - 1)
-                is_out = live & ((i + 1) % k == 0)
-                g = (g[0], g[1] + jnp.where(is_out, ct_tm[out_t], 0.0))
-                cmd = jnp.clip(i // k, 0, t - 1)
-                c_in = jax.tree.map(lambda b, u=u: b[u], before)
-                _, vjp = jax.vjp(lambda c, p: period(params, c, p), c_in, p_tm[cmd])
-                g_c, g_cmd = vjp(g)
-                g = jax.tree.map(lambda a, b, live=live: jnp.where(live, a, b), g_c, g)
-                g_p = g_p.at[cmd].add(jnp.where(live, g_cmd, 0.0))
-            return j - 1, g, g_p
-
-        _, g, g_p = jax.lax.while_loop(
-            lambda s: s[0] >= 0, body, (n_iter - 1, g0, jnp.zeros_like(p_tm))
-        )
-        zeros = jax.tree.map(jnp.zeros_like, params)
-        return zeros, jnp.swapaxes(g_p, 0, 1), g[1], None
-
-    stretched.defvjp(fwd, bwd)
-    return stretched
 
 
 class LstmWeights(NamedTuple):
@@ -292,14 +211,16 @@ def _multiply_sum(x, w):
 
 
 def _make_stretched_lean(model: ForwardModel, k_max: int, unroll: int, matmul=jnp.matmul):
-    """As `_make_stretched`, with the LSTM written out and a hand-written backward pass.
+    """The custom-VJP function (params, pressure [B, T, 3], pose0 [B, 6], k) -> poses [B, T, 6].
 
-    Per period the forward runs one gate product [B, 6 + H] x [6 + H, 4H] (the pressure part,
-    constant over a command's k periods, is computed once per command), one fused gate update
-    and the two output layers, and stores the activations; the backward runs three products and
-    two fused updates per period, no recomputation. The per-command pressure gradients are
-    block sums of the per-period gate gradients (a cumulative sum, no scatter). `matmul(x, w)`
-    computes the six per-period products.
+    Live periods only: a while loop of ceil(T k / unroll) iterations, `unroll` periods each, the
+    periods past T k masked. Per period the forward runs one gate product
+    [B, 6 + H] x [6 + H, 4H] (the pressure part, constant over a command's k periods, is
+    computed once per command), one fused gate update and the two output layers, and stores the
+    activations; the backward runs three products and two fused updates per period, no
+    recomputation. The per-command pressure gradients are block sums of the per-period gate
+    gradients (a cumulative sum, no scatter). `matmul(x, w)` computes the six per-period
+    products.
     """
     hidden = model.hidden
 
@@ -452,8 +373,8 @@ class TimeConv(nn.Module):
 
     Same variables as `nn.Conv(features, (kernel,))` (kernel [K, C, F], bias [F]) and the same
     result up to float rounding; as a product it runs as one small GEMM on the GPU, where cuDNN
-    picks a direct convolution for these tiny shapes (~12 us per call on an H200, measured by
-    bench/profile_step.py).
+    picks a slow direct convolution for these tiny shapes (`bench.profile_step` shows it;
+    docs/benchmarks.md).
     """
 
     features: int

@@ -54,10 +54,10 @@ from ccgan.models import (
 # ---------------------------------------------------------------------------------- settings
 
 #: The feedback rollouts `TrainConfig.feedback_impl` can name.
-FEEDBACK_IMPLS = ("auto", "cell", "lean", "lean_reduce")
+FEEDBACK_IMPLS = ("auto", "lean", "lean_reduce")
 #: Rollouts that were options once and lost (docs/benchmarks.md, "Retired experiments"). A
 #: config naming one is refused; a stored run naming one resumes with this run's rollout.
-RETIRED_FEEDBACK_IMPLS = ("pallas",)
+RETIRED_FEEDBACK_IMPLS = ("cell", "pallas")
 
 
 class ConfigError(ValueError):
@@ -353,10 +353,10 @@ class TrainConfig:
     gen_unroll: int = 10
     #: F_c periods per loop iteration in the feedback rollout and the choice of k.
     feedback_unroll: int = 25
-    #: The feedback rollout, one of `models.forward_stretched`'s ("cell", "lean",
-    #: "lean_reduce"), or "auto": "lean_reduce" on a GPU, where XLA fuses its multiply-and-sum
-    #: products into fewer kernels, "lean" elsewhere, where those products are slower than a
-    #: matrix product (docs/benchmarks.md).
+    #: The feedback rollout, one of `models.forward_stretched`'s ("lean", "lean_reduce"), or
+    #: "auto": "lean_reduce" on a GPU, where XLA fuses its multiply-and-sum products into fewer
+    #: kernels, "lean" elsewhere, where those products are slower than a matrix product
+    #: (docs/benchmarks.md).
     feedback_impl: str = "auto"
     #: WCGAN-GP baseline: one generator and one critic on D_c only, no cycle/identity loss.
     baseline: bool = False
