@@ -1,4 +1,9 @@
-"""Benchmarks whose results are committed under bench/results (see each module's docstring)."""
+"""Timings: how fast the simulator, training and the oracle run, with committed results.
+
+Each module runs as `python -m bench.NAME` (its docstring gives the command); the committed
+results are in bench/results/<machine>/. Studies of accuracy rather than speed live in `studies`;
+docs/benchmarks.md lists every benchmark and study with its numbers.
+"""
 
 import sys
 

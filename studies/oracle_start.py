@@ -5,8 +5,8 @@ seconds of the chosen shapes (held commands, k = 10) and reports the loss of eve
 the best loss and the X_err (cm) of the returned commands in MuJoCo C. The mpc start is
 `eval.mpc.track`'s commands (the oracle's default start).
 
-    PYTHONPATH=. python -m bench.oracle_start --shapes circle --steps 10 \\
-        --runs stretch:0.3 mpc:0.3 mpc:0.03 --out bench/results/cpu/oracle_start
+    python -m studies.oracle_start --shapes circle --steps 10 \\
+        --runs stretch:0.3 mpc:0.3 mpc:0.03 --out studies/results/cpu/oracle_start
 """
 
 from __future__ import annotations
@@ -57,7 +57,7 @@ def main(argv=None) -> None:
             }
         )
         print(f"{run}: best loss {np.round(info['best_loss'], 5)}; {info['wall_s']:.0f} s")
-    header = run_header("bench.oracle_start", argv)
+    header = run_header("studies.oracle_start", argv)
     result = header | {"shapes": a.shapes, "horizon_s": a.horizon, "steps": a.steps, "rows": rows}
     out = Path(a.out)
     out.parent.mkdir(parents=True, exist_ok=True)

@@ -6,7 +6,7 @@ paper data (every other setting at its default, F_c from `--forward-workdir`), t
 factors k. Windows do not overlap, so an epoch has 600 / L windows per trajectory: short windows
 mean more, cheaper steps; long windows let the LSTMs see more time per sample.
 
-    python -m bench.window --epochs 10 --out bench/results/cpu
+    python -m studies.window --epochs 10 --out studies/results/cpu
 
 Writes window.md and window.json to --out.
 """
@@ -35,7 +35,7 @@ def main(argv=None) -> dict:
     parser.add_argument("--lengths", type=int, nargs="+", default=[5, 10, 20])
     parser.add_argument("--epochs", type=int, default=10)
     parser.add_argument("--forward-workdir", default="results/ccgan")
-    parser.add_argument("--out", default="bench/results/cpu")
+    parser.add_argument("--out", default="studies/results/cpu")
     args = parser.parse_args(argv)
 
     ps, xs, bounds = load_npz(f"{DATA}/source_train.npz", f"{DATA}/source_val.npz")
@@ -67,7 +67,7 @@ def main(argv=None) -> dict:
     header = [
         "# Window length: validation tracking error and time",
         "",
-        f"Command: `python -m bench.window --epochs {args.epochs} --out {args.out}`; machine:"
+        f"Command: `python -m studies.window --epochs {args.epochs} --out {args.out}`; machine:"
         f" {cpu_model()}, JAX device {device.platform} ({device.device_kind}); one seed,"
         f" {args.epochs} epochs each on the committed paper data, other settings at their"
         " defaults; error = held-out tip error through F_c, best over k.",

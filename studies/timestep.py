@@ -6,7 +6,7 @@ time-discretisation error) and to 20 segments at 0.5 ms (the space-discretisatio
 `python -m mjx_arm.fidelity` measures properly against the Cosserat rod). Speed is MuJoCo C on one
 thread, simulated seconds per wall second.
 
-    python bench/timestep.py                 # writes bench/results/timestep.{md,json}
+    python -m studies.timestep               # writes studies/results/cpu/timestep.{md,json}
 """
 
 from __future__ import annotations
@@ -49,7 +49,7 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--timesteps", type=float, nargs="+", default=[0.001, 0.002, 0.004, 0.005])
     parser.add_argument("--trajectories", type=int, default=4)
     parser.add_argument("--seconds", type=float, default=30.0)
-    parser.add_argument("--out", type=Path, default=Path("bench/results"))
+    parser.add_argument("--out", type=Path, default=Path("studies/results/cpu"))
     args = parser.parse_args(argv)
     commands = programs(args.trajectories, int(round(args.seconds * 10)), seed=7)
 
@@ -87,7 +87,7 @@ def main(argv: list[str] | None = None) -> None:
     lines = [
         "# Segment count and timestep: error beside speed",
         "",
-        f"CPU: {machine}. Command: `python bench/timestep.py`. {args.trajectories} babbling"
+        f"CPU: {machine}. Command: `python -m studies.timestep`. {args.trajectories} babbling"
         f" programs of {args.seconds:g} s; errors are tip RMS distances over all 10 Hz poses.",
         "",
         "| domain | segments | timestep ms | inertia scale | RMS vs same at 0.5 ms, mm |"

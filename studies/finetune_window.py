@@ -5,8 +5,8 @@ first `window` seconds from rest) and after it. For each folder, each trained se
 (translator_seed{s}.ckpt) runs every shape in the MuJoCo C simulator of D_c; X_err (cm) is
 averaged over seeds.
 
-    PYTHONPATH=. python -m bench.finetune_window results/ccgan results/ccgan_sim_noanchor \\
-        results/ccgan_sim --out bench/results/cpu/finetune_window
+    python -m studies.finetune_window results/ccgan results/ccgan_sim_noanchor \\
+        results/ccgan_sim --out studies/results/cpu/finetune_window
 """
 
 from __future__ import annotations
@@ -49,7 +49,7 @@ def main(argv=None) -> None:
                 "x_err_cm_window": float(err[:, :head].mean()),
                 "x_err_cm_60s": float(err.mean()),
             }
-    header = run_header("bench.finetune_window", argv)
+    header = run_header("studies.finetune_window", argv)
     result = header | {"window_s": a.window, "seeds": a.seeds, "rows": rows}
     out = Path(a.out)
     out.parent.mkdir(parents=True, exist_ok=True)
