@@ -37,15 +37,8 @@ import io as _io  # noqa: E402
 with _contextlib.redirect_stdout(_io.StringIO()):
     from mujoco import mjx as _mjx  # noqa: E402, F401
 
-from mjx_arm.arm import (  # noqa: E402
-    Arm,
-    ModelValidationError,
-    SimState,
-    SimulationDivergedError,
-    check_pressures,
-    load,
-    validate_model,
-)
+from mjx_arm.arm import Arm, SimState, SimulationDivergedError, load  # noqa: E402
+from mjx_arm.checks import ModelValidationError, check_pressures, validate_model  # noqa: E402
 from mjx_arm.constants import (  # noqa: E402
     CHAMBER_ACTUATORS,
     CONTROL_HZ,

@@ -17,6 +17,10 @@ SOLID_MODEL_PATH = ROOT / "models" / "softarm_solid.xml"
 
 #: Actuators of the three chambers, at 0, 120 and 240 degrees around the arm's axis.
 CHAMBER_ACTUATORS = ("chamber_0", "chamber_1", "chamber_2")
+#: Chambers, and the width of a pressure sample.
+N_CHAMBERS = len(CHAMBER_ACTUATORS)
+#: Width of a pose sample: tip position (m, 3) then the tip's unit tangent d3 (3).
+POSE_DIM = 6
 #: Site at the arm's free end; its z axis is the Cosserat d3 director (unit tangent).
 TIP_SITE = "tip"
 

@@ -51,7 +51,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from mjx_arm import constants, valve
+from mjx_arm import checks, constants, rotations, valve
 from mjx_arm.model_gen import ArmParams
 
 _ARM = ArmParams()
@@ -59,8 +59,6 @@ _ARM = ArmParams()
 #: Translational damping constants (1/s) of the paper's two domains [paper code]: per unit mass,
 #: so the medium's force per length is c times the mass per length.
 DOMAIN_DAMPING_PER_S = constants.PAPER_DAMPING_PER_S
-#: Pose layout: tip position (m) then unit d3.
-POSE_DIM = 6
 
 
 @dataclasses.dataclass(frozen=True)
@@ -332,57 +330,6 @@ def straight_state(params: CosseratParams) -> RodState:
     return RodState(x=x, v=np.zeros((n + 1, 3)), q=np.tile(_CLAMP, (n, 1, 1)), w=np.zeros((n, 3)))
 
 
-# ---------------------------------------------------------------------- rotations
-
-
-def _hat(v: jnp.ndarray) -> jnp.ndarray:
-    """[..., 3] -> [..., 3, 3] cross-product matrices."""
-    zero = jnp.zeros_like(v[..., 0])
-    return jnp.stack(
-        [
-            jnp.stack([zero, -v[..., 2], v[..., 1]], -1),
-            jnp.stack([v[..., 2], zero, -v[..., 0]], -1),
-            jnp.stack([-v[..., 1], v[..., 0], zero], -1),
-        ],
-        -2,
-    )
-
-
-def _exp_so3(theta: jnp.ndarray) -> jnp.ndarray:
-    """Rotation vectors [..., 3] -> rotation matrices exp(hat(theta)) [..., 3, 3] (Rodrigues)."""
-    angle = jnp.linalg.norm(theta, axis=-1)
-    small = angle < 1e-8
-    safe = jnp.where(small, 1.0, angle)
-    a = jnp.where(small, 1.0 - angle**2 / 6.0, jnp.sin(safe) / safe)
-    b = jnp.where(small, 0.5 - angle**2 / 24.0, 2.0 * (jnp.sin(0.5 * safe) / safe) ** 2)
-    k = _hat(theta)
-    eye = jnp.eye(3, dtype=theta.dtype)
-    return eye + a[..., None, None] * k + b[..., None, None] * (k @ k)
-
-
-def _log_so3(rot: jnp.ndarray) -> jnp.ndarray:
-    """Rotation matrices [..., 3, 3] (angle < pi) -> rotation vectors [..., 3]."""
-    skew = 0.5 * jnp.stack(
-        [
-            rot[..., 2, 1] - rot[..., 1, 2],
-            rot[..., 0, 2] - rot[..., 2, 0],
-            rot[..., 1, 0] - rot[..., 0, 1],
-        ],
-        -1,
-    )
-    sin_angle = jnp.linalg.norm(skew, axis=-1)
-    cos_angle = 0.5 * (jnp.trace(rot, axis1=-2, axis2=-1) - 1.0)
-    angle = jnp.arctan2(sin_angle, cos_angle)
-    small = sin_angle < 1e-12
-    factor = jnp.where(small, 1.0, angle / jnp.where(small, 1.0, sin_angle))
-    return factor[..., None] * skew
-
-
-def _orthonormalise(q: jnp.ndarray) -> jnp.ndarray:
-    """One Newton-Schulz step toward the nearest rotation; removes rounding drift."""
-    return 1.5 * q - 0.5 * q @ jnp.swapaxes(q, -1, -2) @ q
-
-
 # ---------------------------------------------------------------------- physics
 
 
@@ -404,11 +351,11 @@ def _loads(
     n_world = jnp.einsum("nji,nj->ni", q, n_local)
 
     q_prev = jnp.concatenate([jnp.asarray(rod.clamp, x.dtype)[None], q[:-1]], axis=0)
-    theta = _log_so3(q_prev @ jnp.swapaxes(q, -1, -2))  # [n, 3] in the frame of q_prev
+    theta = rotations.log_so3(q_prev @ jnp.swapaxes(q, -1, -2))  # [n, 3] in the frame of q_prev
     kappa = theta / rod.voronoi_length[:, None]
     active = rod.chamber_voronoi[:, None] * (chamber_force @ rod.chamber_couple_dir)[None]
     m_local = kappa * rod.bend_diag + active
-    m_mid = jnp.einsum("nij,nj->ni", _exp_so3(0.5 * theta), m_local)
+    m_mid = jnp.einsum("nij,nj->ni", rotations.exp_so3(0.5 * theta), m_local)
     m_world = jnp.einsum("nji,nj->ni", q_prev, m_mid)
 
     zero = jnp.zeros((1, 3), x.dtype)
@@ -433,7 +380,7 @@ def _step(
     """One position-Verlet step: half drift, kick with damping, half drift; base node fixed."""
     h = 0.5 * rod.dt
     x = (state.x + h * state.v).at[0].set(0.0)
-    q = _exp_so3(-h * state.w) @ state.q
+    q = rotations.exp_so3(-h * state.w) @ state.q
     forces, torques = _loads(rod, x, q, pressure_bar, tip_force_n, tip_couple_nm)
     v = state.v + rod.dt * forces / rod.node_mass[:, None]
     v = (v * trans_damp).at[0].set(0.0)
@@ -441,7 +388,7 @@ def _step(
     w = w + rod.dt * (torques - jnp.cross(w, rod.inertia * w)) / rod.inertia
     w = w * rot_damp
     x = (x + h * v).at[0].set(0.0)
-    q = _exp_so3(-h * w) @ q
+    q = rotations.exp_so3(-h * w) @ q
     return RodState(x, v, q, w)
 
 
@@ -475,7 +422,7 @@ def _settle(
     def body(carry):
         st, k, _ = carry
         st, _ = jax.lax.scan(chunk, st, None, length=n_chunk)
-        st = st._replace(q=_orthonormalise(st.q))
+        st = st._replace(q=rotations.orthonormalise(st.q))
         speed = jnp.maximum(jnp.abs(st.v).max(), radius * jnp.abs(st.w).max())
         return st, k + 1, speed
 
@@ -502,7 +449,7 @@ def _rollout_single(
         st, pressure = carry
         pressures = valve.substep_pressures(pressure, command, n_substeps, rod.dt, valve_params)
         st, _ = jax.lax.scan(physics_step, st, pressures)
-        st = st._replace(q=_orthonormalise(st.q))
+        st = st._replace(q=rotations.orthonormalise(st.q))
         return (st, pressures[-1]), tip_pose(st)
 
     p0 = jnp.full((3,), valve_params.p_min_bar, commands.dtype)
@@ -640,9 +587,7 @@ def rollout(pressures_bar, params: CosseratParams = CosseratParams()) -> np.ndar
     Returns:
       [T, 6] or [B, T, 6] float64 poses: tip position (m) then unit d3.
     """
-    from mjx_arm.arm import check_pressures  # deferred: arm imports mujoco.mjx
-
-    batched = check_pressures(pressures_bar)
+    batched = checks.check_pressures(pressures_bar)
     fn = _rollout_jit(params)
     with jax.enable_x64(True):
         poses = np.asarray(fn(jnp.asarray(batched, jnp.float64)))

@@ -37,12 +37,11 @@ from typing import Any
 
 import numpy as np
 
-from mjx_arm import constants
+from mjx_arm import atomic, constants
+from mjx_arm.constants import N_CHAMBERS, POSE_DIM
 
 #: Bumped when the file layout changes.
 FORMAT_VERSION = 1
-POSE_DIM = 6
-N_CHAMBERS = 3
 _ARRAY_KEYS = ("pressures_bar", "poses", "pose_low", "pose_high")
 #: The file that names a run's files in its folder.
 MANIFEST_NAME = "manifest.json"
@@ -212,90 +211,12 @@ def save_dataset(path: str | os.PathLike, dataset: Dataset) -> Path:
             " replacing one file would mix runs. Write the run to a new folder (`save_folder`)."
         )
     path.parent.mkdir(parents=True, exist_ok=True)
-    remove_stale_temporaries(path)
+    atomic.remove_stale_temporaries(path)
 
     def write(f):
         np.savez(f, meta=np.array(json.dumps(meta, sort_keys=True)), **arrays)
 
-    return _write_atomically(path, write)
-
-
-def _write_atomically(path: Path, write) -> Path:
-    """Calls write(binary file) on a temporary file beside `path`, syncs it, renames it over
-    `path`; removes the temporary on any error."""
-    fd, tmp = tempfile.mkstemp(prefix=_temporary_prefix(path), suffix=".tmp", dir=path.parent)
-    try:
-        os.chmod(tmp, 0o666 & ~_umask())  # mkstemp makes 0600 files; honour the umask instead
-        with os.fdopen(fd, "wb") as f:
-            write(f)
-            f.flush()
-            os.fsync(f.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        try:
-            os.unlink(tmp)
-        except FileNotFoundError:
-            pass
-        raise
-    return path
-
-
-def _temporary_prefix(path: Path) -> str:
-    """Temporaries of `path` are named ``.<name>.<pid>.<random>.tmp`` (``.old`` for a folder
-    being replaced), beside it, so that a later process can tell whether their writer is dead."""
-    return f".{path.name}.{os.getpid()}."
-
-
-def _alive(pid: int) -> bool:
-    """Whether process `pid` runs on this machine (signal 0 only checks; it sends nothing)."""
-    if pid <= 0:
-        return False
-    try:
-        os.kill(pid, 0)
-    except ProcessLookupError:
-        return False
-    except PermissionError:
-        return True
-    return True
-
-
-def remove_stale_temporaries(path: str | os.PathLike) -> list[Path]:
-    """Removes the temporaries of `path` (a dataset file or a run folder) that a killed process
-    left beside it.
-
-    A temporary whose writer still runs is left alone. A folder moved aside for replacement
-    (``.old``) whose writer died before renaming the new folder into place is the only copy of
-    the earlier run: it is put back at `path` when `path` is missing, removed otherwise.
-
-    Returns:
-      The temporaries removed or put back.
-    """
-    path = Path(path)
-    if not path.parent.is_dir():
-        return []
-    prefix = f".{path.name}."
-    done = []
-    for entry in sorted(path.parent.iterdir()):
-        name = entry.name
-        if not name.startswith(prefix) or not name.endswith((".tmp", ".old")):
-            continue
-        pid = name[len(prefix) :].split(".", 1)[0]
-        if not pid.isdigit() or _alive(int(pid)):
-            continue  # not one of ours (e.g. ".out.npz.<pid>...tmp" beside folder "out"), or live
-        if name.endswith(".old") and not path.exists():
-            os.replace(entry, path)
-        elif entry.is_dir() and not entry.is_symlink():
-            shutil.rmtree(entry, ignore_errors=True)
-        else:
-            entry.unlink(missing_ok=True)
-        done.append(entry)
-    return done
-
-
-def _umask() -> int:
-    mask = os.umask(0)
-    os.umask(mask)
-    return mask
+    return atomic.write_atomically(path, write)
 
 
 def load_dataset(path: str | os.PathLike, expected_model_hash: str | None = None) -> Dataset:
@@ -432,7 +353,7 @@ def write_manifest(folder: str | os.PathLike) -> Path:
     """Writes `build_manifest(folder)` to ``folder/manifest.json`` atomically; returns its path."""
     folder = Path(folder)
     text = json.dumps(build_manifest(folder), indent=1, sort_keys=True) + "\n"
-    return _write_atomically(folder / MANIFEST_NAME, lambda f: f.write(text.encode()))
+    return atomic.write_atomically(folder / MANIFEST_NAME, lambda f: f.write(text.encode()))
 
 
 def read_manifest(folder: str | os.PathLike) -> dict[str, Any]:
@@ -511,7 +432,7 @@ def save_folder(out_dir: str | os.PathLike, datasets: Mapping[str, Dataset]) -> 
     Everything is written into a temporary sibling folder, synced, and renamed into place at
     the end; an earlier `out_dir` is moved aside and removed only then. Killed at any point, the
     process leaves `out_dir` as it was (or, between the two renames, the earlier folder moved
-    aside, which the next run puts back), never a mix; `remove_stale_temporaries` tidies up.
+    aside, which the next run puts back), never a mix; `atomic.remove_stale_temporaries` tidies up.
 
     Args:
       out_dir: the run's folder. If it exists it must be one `check_output_folder` accepts.
@@ -531,20 +452,20 @@ def save_folder(out_dir: str | os.PathLike, datasets: Mapping[str, Dataset]) -> 
         raise DatasetError(f"need plain *.npz file names, got {list(datasets)}")
     check_output_folder(out_dir)
     out_dir.parent.mkdir(parents=True, exist_ok=True)
-    remove_stale_temporaries(out_dir)
+    atomic.remove_stale_temporaries(out_dir)
     tmp = Path(
-        tempfile.mkdtemp(prefix=_temporary_prefix(out_dir), suffix=".tmp", dir=out_dir.parent)
+        tempfile.mkdtemp(prefix=atomic.temporary_prefix(out_dir), suffix=".tmp", dir=out_dir.parent)
     )
     try:
-        os.chmod(tmp, 0o777 & ~_umask())
+        os.chmod(tmp, 0o777 & ~atomic.umask())
         for name, ds in datasets.items():
             save_dataset(tmp / name, ds)
         write_manifest(tmp)
-        _fsync_dir(tmp)
+        atomic.fsync_dir(tmp)
         if out_dir.exists():
             old = Path(
                 tempfile.mkdtemp(
-                    prefix=_temporary_prefix(out_dir), suffix=".old", dir=out_dir.parent
+                    prefix=atomic.temporary_prefix(out_dir), suffix=".old", dir=out_dir.parent
                 )
             )
             os.replace(out_dir, old)
@@ -556,20 +477,11 @@ def save_folder(out_dir: str | os.PathLike, datasets: Mapping[str, Dataset]) -> 
             shutil.rmtree(old, ignore_errors=True)
         else:
             os.replace(tmp, out_dir)
-        _fsync_dir(out_dir.parent)
+        atomic.fsync_dir(out_dir.parent)
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)
         raise
     return [out_dir / name for name in datasets]
-
-
-def _fsync_dir(folder: Path) -> None:
-    """Makes a folder's entries (new files, renames) durable."""
-    fd = os.open(folder, os.O_RDONLY)
-    try:
-        os.fsync(fd)
-    finally:
-        os.close(fd)
 
 
 def check_output_folder(out_dir: str | os.PathLike) -> Path:

@@ -12,7 +12,7 @@ import math
 import mujoco
 import numpy as np
 
-from mjx_arm import constants, fitted
+from mjx_arm import checks, constants, fitted
 
 #: Explicit (Euler) fluid drag is stable while timestep * drag rate stays below 2; keep a margin.
 DRAG_STEP_MARGIN = 0.5
@@ -77,10 +77,10 @@ def resolve(domain: str | Domain) -> Domain:
 
 def model_viscosity_scale(mj_model: mujoco.MjModel) -> float:
     """The constrained medium's viscosity over the source's, as the model records it."""
-    for i in range(mj_model.nnumeric):
-        if mj_model.numeric(i).name == constants.CUSTOM_CONSTRAINED_SCALE:
-            return float(mj_model.numeric(i).data[0])
-    return fitted.load_fit(fitted.FIT_PATHS["solid"])["constrained_viscosity_scale"]
+    stored = checks.custom_numeric(mj_model, constants.CUSTOM_CONSTRAINED_SCALE, math.nan)
+    if math.isnan(stored):
+        return fitted.load_fit(fitted.FIT_PATHS["solid"])["constrained_viscosity_scale"]
+    return stored
 
 
 def drag_rate_per_s(mj_model: mujoco.MjModel) -> float:

@@ -14,7 +14,7 @@ import jax
 import numpy as np
 import pytest
 
-from mjx_arm import babble, dataset
+from mjx_arm import atomic, babble, dataset
 from mjx_arm.dataset import DatasetError, ModelHashMismatchError
 
 CONFIG = babble.BabbleConfig(n_train=3, n_val=1, duration_s=2.0, chunk=2, backend="c")
@@ -375,7 +375,7 @@ def test_run_replaces_its_folder_only_when_complete(tmp_path, xml, monkeypatch):
     assert [dataset.load_dataset(p).seed for p in paths] == [7, 7]
     # Killed between its two renames, a run leaves the earlier folder moved aside: put back.
     os.replace(out, tmp_path / f".out.{dead}.ghi.old")
-    assert len(dataset.remove_stale_temporaries(out)) == 1 and os.listdir(tmp_path) == ["out"]
+    assert len(atomic.remove_stale_temporaries(out)) == 1 and os.listdir(tmp_path) == ["out"]
     assert dataset.load_dataset(out / "source_val.npz").seed == 7
 
 
