@@ -1,6 +1,6 @@
 """Cost of the evaluation oracle: Adam steps through the MJX rollout of the D_c arm.
 
-For each horizon and number of programs optimised together (`eval.pipeline.oracle_commands`
+For each horizon and number of programs optimised together (`tracking.oracle.oracle_commands`
 vmaps them), times the first call (compile + one step) and the mean of the next steps, with
 the stretch program of the first shapes as start (k = 10, the evaluation's stretch k). The
 first step includes compiling the gradient.
@@ -21,17 +21,19 @@ import numpy as np
 
 import mjx_arm  # (sets the XLA CPU flag before the first JAX computation)
 from bench import run_header
-from eval import pipeline, shapes
+from mjx_arm.programs import CONTROL_HZ, SHAPES
+from tracking import held
+from tracking.oracle import OracleConfig, oracle_commands
 
 
 def time_oracle(arm_s, arm_c, horizon_s: float, n_programs: int, k: int, steps: int) -> dict:
-    names = list(shapes.SHAPES)[:n_programs]
-    n = int(round(horizon_s * shapes.CONTROL_HZ))
-    programs = [shapes.SHAPES[s](60.0)[:n] for s in names]
+    names = list(SHAPES)[:n_programs]
+    n = int(round(horizon_s * CONTROL_HZ))
+    programs = [SHAPES[s](60.0)[:n] for s in names]
     targets = np.stack([arm_s.rollout(p, backend="c") for p in programs])
-    inits = np.stack([pipeline.stretch(p, k) for p in programs])
-    cfg = pipeline.OracleConfig(steps=steps)
-    _, info = pipeline.oracle_commands(arm_c, targets, inits, k, cfg)
+    inits = np.stack([held.stretch(p, k) for p in programs])
+    cfg = OracleConfig(steps=steps)
+    _, info = oracle_commands(arm_c, targets, inits, k, cfg)
     first_s, rest = info["step_wall_s"][0], info["step_wall_s"][1:]
     step_s = float(np.mean(rest))
     history = np.asarray(info["loss_history"])

@@ -2,11 +2,12 @@
 
 `ccgan.finetune` differentiates the tracking error through the MJX rollout, which is slow and
 reaches only a short window from rest. Here the simulator acts once, ahead of training: the
-receding-horizon tracker `eval.mpc.track` computes, in MuJoCo C, D_c commands that make the arm
-in D_c follow the D_s poses of shape-like programs (`eval.shapes.shape_like_programs`, never the
-five test shapes), over their whole length. G_c is then trained to reproduce those commands:
+receding-horizon tracker `tracking.mpc.track` computes, in MuJoCo C, D_c commands that make the
+arm in D_c follow the D_s poses of shape-like programs (`mjx_arm.programs.shape_like_programs`,
+never the five test shapes), over their whole length. G_c is then trained to reproduce those
+commands:
 
-    D_s program p_s [T, 3] --D_s sim--> x_s [T, 6] --eval.mpc.track (D_c sim)--> c* [T, 3]
+    D_s program p_s [T, 3] --D_s sim--> x_s [T, 6] --tracking.mpc.track (D_c sim)--> c* [T, 3]
     loss = mean_t(w_t (G_c(p_s, x_s)_t - c*_t)^2) over pressures normalised to [0, 1],
            w_t = head_weight in the first window_s seconds, 1 after (normalised to mean 1)
 
@@ -42,8 +43,13 @@ import numpy as np
 import mjx_arm  # noqa: F401  (before jax: sets the XLA CPU flag)
 from ccgan.data import PRESSURE_DIM, normalise_pressure, samples
 from ccgan.finetune import common_k, generator_commands, keep_better, stage_parser, start_stage
-from ccgan.train import ConfigError, add_config_flags, check_fields, config_from_args
+from ccgan.train import add_config_flags, config_from_args
 from ccgan.translator import Translator
+from mjx_arm.programs import shape_like_programs
+from tracking import mpc
+from tracking.config import ConfigError, check_fields
+from tracking.held import run_dc, stretch
+from tracking.metrics import position_error_cm
 
 
 @dataclasses.dataclass(frozen=True)
@@ -68,7 +74,7 @@ class DistillConfig:
     start from rest is where the oracle is compared and where the teacher's commands change
     fastest."""
     horizon_steps: int = 1
-    """The teacher's planning horizon (`eval.mpc.MpcConfig.horizon_steps`)."""
+    """The teacher's planning horizon (`tracking.mpc.MpcConfig.horizon_steps`)."""
     iterations: int = 2
     """The teacher's Gauss-Newton iterations per step."""
     epochs: int = 300
@@ -139,10 +145,6 @@ def teacher_data(
       "x_val" (m, unit d3), "c_train" [N, T, 3] and "c_val" (teacher commands per source step,
       bar), plus "teacher_val_x_err_cm" [n_val] (the teacher's own held-out X_err).
     """
-    from eval import mpc
-    from eval.metrics import position_error_cm
-    from eval.shapes import shape_like_programs
-
     key = json.dumps(config.teacher_key() | {"k": k, "model": arm_c.model_hash}, sort_keys=True)
     splits = (
         ("train", config.n_train, False),
@@ -232,9 +234,6 @@ def distill(
     import jax.numpy as jnp
     import optax
     from tqdm.auto import tqdm
-
-    from eval.metrics import position_error_cm
-    from eval.pipeline import run_dc, stretch
 
     k = common_k(translators)
     n_train = config.n_train + config.n_train_full  # >= batch_size (DistillConfig checks)

@@ -11,7 +11,7 @@ separate the methods in `eval/`. Here the feedback loss is taken through the sim
 and only G_c's weights change (Adam, small steps), starting from the trained translator. The
 programs are `window_s` seconds from rest, drawn from their own random stream, never the
 evaluation shapes: motor-babbling programs (`programs="babble"`) or random programs of the
-shapes' signal types (`programs="shape_like"`, `eval.shapes.shape_like_program`: ellipses,
+shapes' signal types (`programs="shape_like"`, `mjx_arm.programs.shape_like_program`: ellipses,
 spirals, polygons, staircases, phase jumps); their D_s targets come from one MuJoCo C batch.
 
 The simulator's gradient only reaches the first `window_s` seconds of a program; left alone,
@@ -59,18 +59,15 @@ from pathlib import Path
 import numpy as np
 
 import mjx_arm  # noqa: F401  (before jax: sets the XLA CPU flag)
-from ccgan import checkpoint, losses
+from ccgan import checkpoint
 from ccgan.data import PRESSURE_DIM, denormalise_pressure, samples
-from ccgan.train import (
-    ConfigError,
-    add_config_flags,
-    check_fields,
-    check_output_dir,
-    cli_parser,
-    config_from_args,
-)
+from ccgan.train import add_config_flags, check_output_dir, cli_parser, config_from_args
 from ccgan.translator import Translator, translator_from_checkpoint
 from mjx_arm import constants
+from mjx_arm.programs import shape_like_programs
+from tracking.config import ConfigError, check_fields
+from tracking.held import run_dc, stretch
+from tracking.metrics import position_error_cm, tracking_loss
 
 #: Program families a fine-tune can draw from (`FinetuneConfig.programs`).
 PROGRAM_FAMILIES = ("babble", "shape_like")
@@ -82,7 +79,7 @@ class FinetuneConfig:
 
     programs: str = "babble"
     """Program family of every training, anchor and held-out program: "babble" (motor
-    babbling, `mjx_arm.babble`) or "shape_like" (`eval.shapes.shape_like_program`: random
+    babbling, `mjx_arm.babble`) or "shape_like" (`mjx_arm.programs.shape_like_program`: random
     ellipses, polygons, staircases and phase jumps like the test shapes, never one of them)."""
     steps: int = 40
     """Adam steps."""
@@ -168,8 +165,6 @@ def training_programs(
     `window_s`) seconds, from the split's own random stream."""
     duration_s = config.window_s if duration_s is None else duration_s
     if config.programs == "shape_like":
-        from eval.shapes import shape_like_programs
-
         return shape_like_programs(n, duration_s, seed=config.seed, split=f"finetune/{split}")
     from mjx_arm import babble
 
@@ -187,9 +182,6 @@ def generator_commands(translator: Translator, g_params, samples_s):
 def x_err_cm_c(arm_c, commands_bar: np.ndarray, k: int, target: np.ndarray):
     """Mean X_err (cm) of held commands [..., B, T, 3] in the MuJoCo C simulator against the
     targets [B, T, 6], all in one batched rollout; a float for [B, T, 3], else an array [...]."""
-    from eval.metrics import position_error_cm
-    from eval.pipeline import run_dc, stretch
-
     commands_bar = np.asarray(commands_bar)
     lead = commands_bar.shape[:-3]
     flat = commands_bar.reshape((-1,) + commands_bar.shape[-2:])
@@ -289,7 +281,7 @@ def finetune(
         """(Total loss, tracking part) for one member's parameters."""
         commands = generator_commands(tr, g_params, s_batch)
         poses, ok = rollout(mjx_model, jnp.repeat(commands, k, axis=-2))
-        per_program = losses.tracking_loss(poses[:, k - 1 :: k], x_batch, w)
+        per_program = tracking_loss(poses[:, k - 1 :: k], x_batch, w)
         # A diverged rollout (never seen in practice) adds nothing rather than NaN.
         tracking = jnp.where(ok[:, -1], per_program, 0.0).mean()
         after = slice(window_steps, None)

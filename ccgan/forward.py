@@ -15,9 +15,9 @@ import jax.numpy as jnp
 import numpy as np
 import optax
 
-from ccgan import losses
 from ccgan.data import PRESSURE_DIM, DomainSplit, PoseBounds, denormalise_pose
 from ccgan.models import ForwardModel, forward_open_loop
+from tracking.metrics import orientation_error_rad, position_error_cm
 
 
 @dataclasses.dataclass(frozen=True)
@@ -106,8 +106,8 @@ def evaluate_forward(model: ForwardModel, params, split: DomainSplit, bounds: Po
     out = {}
     for name, pred in (("one_step", one), ("open_loop", ol)):
         pred_m = denormalise_pose(np.asarray(pred), bounds)
-        out[f"{name}_cm"] = float(np.mean(losses.position_error_cm(pred_m, target_m)))
-        out[f"{name}_rad"] = float(np.mean(losses.orientation_error_rad(pred_m, target_m)))
+        out[f"{name}_cm"] = float(np.mean(position_error_cm(pred_m, target_m)))
+        out[f"{name}_rad"] = float(np.mean(orientation_error_rad(pred_m, target_m)))
     return out
 
 

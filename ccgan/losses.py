@@ -1,4 +1,8 @@
-"""Loss terms of the CCGAN-GP, as small pure functions (B = batch, T = time, D = features)."""
+"""Loss terms of the CCGAN-GP, as small pure functions (B = batch, T = time, D = features).
+
+The tracking metrics (X_err, phi_err) and the simulator tracking loss are not here but in
+`tracking.metrics`, one copy for every layer.
+"""
 
 from __future__ import annotations
 
@@ -97,28 +101,3 @@ def feedback_loss(predicted_pose, target_pose):
       scalar.
     """
     return jnp.mean((predicted_pose - target_pose) ** 2)
-
-
-def tracking_loss(poses_m, target_m, orientation_weight_cm_per_rad: float):
-    """Per-program tracking loss [...]: mean over time of X_err_cm^2 + w^2 * 2 (1 - cos phi).
-
-    Args:
-      poses_m, target_m: [..., T, 6] poses (tip position in m, then the unit d3 director).
-      orientation_weight_cm_per_rad: w, the cm of position error one rad of orientation error
-        is worth (2 (1 - cos phi) ~ phi^2 for small phi).
-    """
-    x_cm2 = jnp.sum((100.0 * (poses_m[..., :3] - target_m[..., :3])) ** 2, axis=-1)
-    phi2 = 2.0 * (1.0 - jnp.sum(poses_m[..., 3:] * target_m[..., 3:], axis=-1))
-    return jnp.mean(x_cm2 + orientation_weight_cm_per_rad**2 * phi2, axis=-1)
-
-
-def position_error_cm(pred_pose_m, target_pose_m):
-    """Tip position error ||X_pred - X_target||_2 in cm: [..., 6] x [..., 6] (m) -> [...]."""
-    return 100.0 * jnp.linalg.norm(pred_pose_m[..., :3] - target_pose_m[..., :3], axis=-1)
-
-
-def orientation_error_rad(pred_pose, target_pose):
-    """arccos of the cosine similarity of the d3 directors: [..., 6] x [..., 6] -> [...] (rad)."""
-    a, b = pred_pose[..., 3:], target_pose[..., 3:]
-    cos = jnp.sum(a * b, -1) / (jnp.linalg.norm(a, axis=-1) * jnp.linalg.norm(b, axis=-1) + 1e-12)
-    return jnp.arccos(jnp.clip(cos, -1.0, 1.0))

@@ -22,9 +22,6 @@ import csv
 import dataclasses
 import inspect
 import json
-import math
-import numbers
-import operator
 import os
 import re
 import textwrap
@@ -50,6 +47,8 @@ from ccgan.models import (
     forward_stretched,
     forward_stretched_masked,
 )
+from tracking.config import ConfigError, check_fields
+from tracking.metrics import position_error_cm
 
 # ---------------------------------------------------------------------------------- settings
 
@@ -58,67 +57,6 @@ FEEDBACK_IMPLS = ("auto", "lean", "lean_reduce")
 #: Rollouts that were options once and lost (docs/benchmarks.md, "Retired experiments"). A
 #: config naming one is refused; a stored run naming one resumes with this run's rollout.
 RETIRED_FEEDBACK_IMPLS = ("cell", "pallas")
-
-
-class ConfigError(ValueError):
-    """A settings field holds a value the code cannot use.
-
-    Raised by the config dataclasses' `__post_init__`, so the Python API and the command line
-    refuse the same values; `config_from_args` turns it into a usage error naming the flag.
-
-    Attributes:
-      field: the offending field.
-      problem: what is wrong, a phrase that follows the field's name ("must be >= 1, got 0").
-    """
-
-    def __init__(self, field: str, problem: str):
-        super().__init__(f"{field} {problem}")
-        self.field, self.problem = field, problem
-
-
-_BOUND_CHECKS = ((">=", operator.ge), (">", operator.gt), ("<", operator.lt))
-
-
-def check_fields(
-    config,
-    at_least: dict[str, float] | None = None,
-    above: dict[str, float] | None = None,
-    below: dict[str, float] | None = None,
-) -> None:
-    """Refuses fields of `config` that are not finite numbers within their bounds.
-
-    A tuple field is checked element by element and must not be empty. Values traced by JAX
-    (`ccgan.tune` passes hyperparameters into a jitted `dataclasses.replace`) are skipped: they
-    were checked when concrete.
-
-    Args:
-      config: a dataclass instance.
-      at_least: {field: lowest allowed value}.
-      above: {field: a bound the value must exceed}.
-      below: {field: a bound the value must stay under}.
-
-    Raises:
-      ConfigError: the first field out of range, with its value.
-    """
-    for (word, ok), rules in zip(_BOUND_CHECKS, (at_least, above, below), strict=True):
-        for name, bound in (rules or {}).items():
-            value = getattr(config, name)
-            many = isinstance(value, tuple | list)
-            if many and not value:
-                raise ConfigError(name, "must not be empty")
-            for v in value if many else (value,):
-                if isinstance(v, jax.core.Tracer):
-                    continue
-                if (
-                    isinstance(v, bool)
-                    or not isinstance(v, numbers.Real | np.ndarray | jax.Array)
-                    or not math.isfinite(float(v))
-                    or not ok(float(v), bound)
-                ):
-                    each = "each " if many else ""
-                    raise ConfigError(
-                        name, f"must be {each}a finite number {word} {bound}, got {value!r}"
-                    )
 
 
 def _first_sentence(text: str) -> str:
@@ -600,7 +538,7 @@ def make_trainer(
                 fwd, forward_c_params, commands, pose0, k, config.k_max, config.feedback_unroll
             )
             span = high - low
-            return losses.position_error_cm(pred * span + low, target * span + low).mean()
+            return position_error_cm(pred * span + low, target * span + low).mean()
 
         return jax.vmap(for_k)(choices)
 

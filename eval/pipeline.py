@@ -4,32 +4,32 @@ For each shape: the D_s program [T, 3] (bar) runs in the D_s simulator and gives
 [T, 6]. A method turns (D_s pressures, target poses) into D_c commands [T * k, 3] (each source
 step spread over k control periods); the D_c simulator runs them from rest, and every k-th pose
 (the pose at the end of each source step's k periods) is compared with the target:
-X_err (cm) and phi_err (rad), see `eval.metrics`. Unlike the paper, which scored through the
+X_err (cm) and phi_err (rad), see `tracking.metrics`. Unlike the paper, which scored through the
 learned forward model F_c, the errors here come from the simulator itself.
 
 Methods:
   none     D_s pressures straight into D_c (k = 1).
   stretch  D_s pressures, each held k periods; k minimises the tracking error on a separate
-           validation program (`shapes.validation_program`), searched over
+           validation program (`mjx_arm.programs.validation_program`), searched over
            EvalConfig.stretch_candidates = {1, 5, 10, ..., 30}: the GAN's set {5, ..., 30} plus 1.
   ccgan    the trained CCGAN-GP translator `ccgan.load_translator(path)`. Every translator
            method is skipped with a note when its default checkpoint is absent; one that was
            asked for (--ccgan-path etc.) must load, or the run stops before any work.
   ccgan_sim  the CCGAN-GP translator fine-tuned in the simulator: through the MJX rollout
            (`ccgan.finetune`: results/ccgan_sim, ccgan_sim2, ccgan_sim3 on babbling programs,
-           ccgan_sim4, ccgan_sim5 on shape-like ones), then by imitation of `eval.mpc`
+           ccgan_sim4, ccgan_sim5 on shape-like ones), then by imitation of `tracking.mpc`
            (`ccgan.distill`: ccgan_sim6, ccgan_sim7, ccgan_sim8): the last stage's
            results/ccgan_sim8/translator.ckpt or --ccgan-sim-path; not in the default methods.
   wcgan    the WCGAN-GP baseline translator: a translator checkpoint given by --wcgan-path or
            found at results/wcgan/translator.ckpt.
-  mpc      receding-horizon tracking in the D_c simulator itself (`eval.mpc.track`, MuJoCo C,
+  mpc      receding-horizon tracking in the D_c simulator itself (`tracking.mpc.track`, MuJoCo C,
            k = the stretch k): at every source step the next command is planned by Gauss-Newton
            on the simulated tracking error and applied. Not a translator (it needs the D_c
            simulator at translation time); a model-based reference. Not in the default methods.
   oracle   D_c commands optimised directly through the differentiable MJX rollout with
-           optax Adam (k = the stretch k), commands kept in the valve range by a sigmoid, starting
-           from the mpc commands (OracleConfig.init; "stretch" starts from the stretch program);
-           a lower reference for the other methods. Like every
+           optax Adam (`tracking.oracle`; k = the stretch k), commands kept in the valve range by
+           a sigmoid, starting from the mpc commands (OracleConfig.init; "stretch" starts from
+           the stretch program); a lower reference for the other methods. Like every
            translator's output, one command per source step held k periods (OracleConfig.held;
            --oracle-per-period frees every control period). All shapes are
            optimised together (one vmapped rollout). Gradients through thousands of MJX steps
@@ -46,7 +46,6 @@ import argparse
 import dataclasses
 import inspect
 import json
-import math
 import os
 import sys
 import threading
@@ -57,9 +56,13 @@ import numpy as np
 from tqdm import tqdm
 
 import mjx_arm  # (before jax: sets the XLA CPU flag)
-from ccgan.train import ConfigError, HelpFormatter, check_fields
-from eval import metrics, mpc, shapes
-from mjx_arm import constants
+from ccgan.train import HelpFormatter
+from mjx_arm import constants, programs
+from tracking import metrics, mpc
+from tracking import oracle as oracle_lib
+from tracking.config import ConfigError, check_duration, check_fields, check_ints, require
+from tracking.held import choose_stretch_k, every_kth, rollout_grouped, stretch
+from tracking.oracle import OracleConfig
 
 METHODS = ("none", "stretch", "ccgan", "ccgan_sim", "wcgan", "mpc", "oracle")
 #: What runs without --methods (the oracle is left out on CPU).
@@ -91,41 +94,10 @@ class TranslatorError(ValueError):
     does not load; the run stops before any work instead of skipping the method."""
 
 
-def _require(ok: bool, field: str, problem: str) -> None:
-    """ConfigError(field, problem) unless ok; `problem` follows the field's name."""
-    if not ok:
-        raise ConfigError(field, problem)
-
-
-def _check_ints(field: str, values, lowest: int) -> None:
-    """A tuple of distinct integers >= lowest, or one integer >= lowest."""
-    many = isinstance(values, tuple | list)
-    items = values if many else (values,)
-    _require(
-        len(items) > 0
-        and all(isinstance(v, int | np.integer) and not isinstance(v, bool) for v in items)
-        and all(v >= lowest for v in items)
-        and len(set(items)) == len(items),
-        field,
-        f"must be {'distinct integers' if many else 'an integer'} >= {lowest}, got {values!r}",
-    )
-
-
-def _check_duration(field: str, value) -> None:
-    """A program length (s) that gives at least one command (`shapes.times_s`)."""
-    _require(
-        isinstance(value, int | float)
-        and math.isfinite(value)
-        and round(value * shapes.CONTROL_HZ) >= 1,
-        field,
-        f"must be a length (s) of at least one {1 / shapes.CONTROL_HZ:g} s command, got {value!r}",
-    )
-
-
 def _check_names(field: str, values, known) -> None:
     """A non-empty tuple of distinct names, each one of `known`."""
     unknown = [v for v in values if v not in known]
-    _require(
+    require(
         len(values) > 0 and not unknown and len(set(values)) == len(values),
         field,
         f"must name distinct ones of {list(known)}, got {list(values)}",
@@ -135,46 +107,7 @@ def _check_names(field: str, values, known) -> None:
 def _check_file(field: str, path) -> None:
     """An explicitly given input file (a translator checkpoint, an MJCF) that exists."""
     if path is not None:
-        _require(Path(path).is_file(), field, f"names no file: {path}")
-
-
-@dataclasses.dataclass(frozen=True)
-class OracleConfig:
-    """Direct optimisation of D_c commands through MJX (the achievable-error reference)."""
-
-    steps: int = 30
-    """Adam steps (a few hundred on a GPU; the CPU default is small)."""
-    learning_rate: float = 0.03
-    """Adam step size on the sigmoid logits (dimensionless). From the mpc start 0.3 overshoots
-    (bench/oracle_start.py); the stretch-started tables of earlier commits used 0.3."""
-    horizon_s: float | None = 2.0
-    """Seconds of the source program optimised (None: all of it)."""
-    orientation_weight_cm_per_rad: float = 10.0
-    """How many cm of position error one rad of orientation error is worth in the loss."""
-    held: bool = True
-    """One command per source step held k periods, the output space of every translator
-    (False: a free command per control period)."""
-    init: str = "mpc"
-    """Where Adam starts: "mpc" (the receding-horizon tracker's commands, `eval.mpc`) or
-    "stretch" (the stretch program)."""
-
-    def __post_init__(self):
-        """Refuses settings that would fail (or mean nothing) after minutes of work; fields are
-        named "oracle.<field>" in the ConfigError."""
-        _require(
-            self.init in ("mpc", "stretch"),
-            "oracle.init",
-            f"must be 'mpc' or 'stretch', got {self.init!r}",
-        )
-        _check_ints("oracle.steps", self.steps, 1)
-        if self.horizon_s is not None:
-            _check_duration("oracle.horizon_s", self.horizon_s)
-        try:
-            check_fields(
-                self, above={"learning_rate": 0}, at_least={"orientation_weight_cm_per_rad": 0}
-            )
-        except ConfigError as err:
-            raise ConfigError(f"oracle.{err.field}", err.problem) from None
+        require(Path(path).is_file(), field, f"names no file: {path}")
 
 
 @dataclasses.dataclass(frozen=True)
@@ -182,8 +115,8 @@ class EvalConfig:
     """What to evaluate and where to write it. Every field is checked when the config is made
     (`ConfigError`), so no run fails on a setting after minutes of simulation."""
 
-    shapes: tuple[str, ...] = tuple(shapes.SHAPES)
-    """Shape names (keys of `shapes.SHAPES`)."""
+    shapes: tuple[str, ...] = tuple(programs.SHAPES)
+    """Shape names (keys of `programs.SHAPES`)."""
     methods: tuple[str, ...] = METHODS
     """Methods to run; a translator whose default checkpoint is absent is skipped with a note."""
     seeds: tuple[int, ...] = (0, 1, 2)
@@ -237,21 +170,21 @@ class EvalConfig:
         """Refuses settings that would fail (or mean nothing) after minutes of work."""
         from mjx_arm import domains
 
-        _check_names("shapes", self.shapes, shapes.SHAPES)
+        _check_names("shapes", self.shapes, programs.SHAPES)
         _check_names("methods", self.methods, METHODS)
-        _check_ints("seeds", self.seeds, 0)  # numpy seeds are >= 0
-        _check_duration("duration_s", self.duration_s)
-        _check_duration("validation_duration_s", self.validation_duration_s)
-        _require(
+        check_ints("seeds", self.seeds, 0)  # numpy seeds are >= 0
+        check_duration("duration_s", self.duration_s, programs.CONTROL_HZ)
+        check_duration("validation_duration_s", self.validation_duration_s, programs.CONTROL_HZ)
+        require(
             self.backend in ("c", "mjx"), "backend", f"must be 'c' or 'mjx', got {self.backend!r}"
         )
-        _check_ints("stretch_candidates", self.stretch_candidates, 1)  # control periods per step
-        _check_ints("n_repeats", self.n_repeats, 1)
-        _check_ints("video_fps", self.video_fps, 1)
-        _require(len(self.video_panel_hw) == 2, "video_panel_hw", "must be (height, width)")
-        _check_ints("video_panel_hw", tuple(self.video_panel_hw), 1)
+        check_ints("stretch_candidates", self.stretch_candidates, 1)  # control periods per step
+        check_ints("n_repeats", self.n_repeats, 1)
+        check_ints("video_fps", self.video_fps, 1)
+        require(len(self.video_panel_hw) == 2, "video_panel_hw", "must be (height, width)")
+        check_ints("video_panel_hw", tuple(self.video_panel_hw), 1)
         check_fields(self, at_least={"noise_stds": 0}, above={"video_speedup": 0})
-        _require(
+        require(
             self.out_dir is None or not Path(self.out_dir).is_file(),
             "out_dir",
             f"names a file, not a folder: {self.out_dir}",
@@ -259,14 +192,14 @@ class EvalConfig:
         if self.xml is None:
             _check_file("model_path", self.model_path)
         targets = [d for d in domains.DOMAINS if d != "source"]
-        _require(
+        require(
             self.target_domain in targets,
             "target_domain",
             f"must be one of {targets}, got {self.target_domain!r}",
         )
         for field in ("ccgan_path", "wcgan_path", "ccgan_sim_path"):
             _check_file(field, getattr(self, field))
-        _require(isinstance(self.oracle, OracleConfig), "oracle", "must be an OracleConfig")
+        require(isinstance(self.oracle, OracleConfig), "oracle", "must be an OracleConfig")
 
 
 def quick(cfg: EvalConfig) -> EvalConfig:
@@ -419,65 +352,6 @@ def load_arms(cfg: EvalConfig):
 # ------------------------------------------------------------------------------------ methods
 
 
-def stretch(pressures_bar: np.ndarray, k: int) -> np.ndarray:
-    """Holds each command k control periods: [..., T, 3] -> [..., T * k, 3]."""
-    return np.repeat(np.asarray(pressures_bar), k, axis=-2)
-
-
-def every_kth(poses_c: np.ndarray, k: int) -> np.ndarray:
-    """The pose at the end of each source step's k periods: [..., T * k, 6] -> [..., T, 6]."""
-    return poses_c[..., k - 1 :: k, :]
-
-
-def run_dc(arm_c, commands_c: np.ndarray, k: int, backend: str) -> np.ndarray:
-    """D_c rollout(s) from rest of commands [..., T * k, 3] (bar); returns [..., T, 6] poses."""
-    return every_kth(arm_c.rollout(commands_c, backend=backend), k)
-
-
-def rollout_grouped(
-    arm, jobs: list[tuple[np.ndarray, int]], backend: str, progress: str | None = None
-) -> list[np.ndarray]:
-    """Poses of many (commands [T * k, 3] bar, k) jobs, every k-th pose ([T, 6] each).
-
-    Jobs of the same command length and k run as batched rollouts (MuJoCo C: one thread per
-    trajectory; MJX: one vmapped call per group), so a many-core machine runs them side by side.
-    With `progress` (the bar's label) a progress bar counts trajectories; on MuJoCo C each group
-    then runs in batches of two trajectories per core, so the bar moves every few seconds (the
-    main job's 245 60 s trajectories at k = 10 take about 1.5 s each on 2 cores) and the poses
-    are the same, as every trajectory is simulated on its own. MJX keeps one call per group
-    (another batch size would compile again).
-    """
-    groups: dict[tuple, list[int]] = {}
-    for i, (cmd, k) in enumerate(jobs):
-        groups.setdefault((np.shape(cmd), int(k)), []).append(i)
-    out: list[np.ndarray | None] = [None] * len(jobs)
-    batch = 2 * (os.cpu_count() or 1) if progress and backend == "c" else len(jobs)
-    with tqdm(total=len(jobs), desc=progress, unit="traj", disable=not progress) as bar:
-        for (_, k), index in groups.items():
-            for start in range(0, len(index), max(batch, 1)):
-                part = index[start : start + batch]
-                poses = run_dc(arm, np.stack([jobs[i][0] for i in part]), k, backend)
-                for i, p in zip(part, poses, strict=True):
-                    out[i] = p
-                bar.update(len(part))
-    return out
-
-
-def choose_stretch_k(arm_s, arm_c, cfg: EvalConfig) -> tuple[int, dict[int, float]]:
-    """Picks the stretch factor with the lowest mean X_err on the validation program.
-
-    Returns:
-      (k, {candidate k: mean X_err (cm) on the validation program}).
-    """
-    p_val = shapes.validation_program(cfg.validation_duration_s)
-    target = arm_s.rollout(p_val, backend=cfg.backend)
-    errors = {}
-    for k in tqdm(cfg.stretch_candidates, desc="stretch k on the validation program", unit="k"):
-        poses = run_dc(arm_c, stretch(p_val, k), k, cfg.backend)
-        errors[int(k)] = float(metrics.position_error_cm(poses, target).mean())
-    return min(errors, key=errors.get), errors
-
-
 class Translator:
     """A loaded translator method: `translate(p_s [T, 3], poses_s [T, 6], seed)`.
 
@@ -590,132 +464,6 @@ def check_translator_arms(translators: dict, arm) -> None:
             )
 
 
-def oracle_commands(
-    arm_c,
-    target_poses: np.ndarray,
-    init_commands: np.ndarray,
-    k: int,
-    cfg: OracleConfig,
-    held=False,
-    progress: bool = False,
-) -> tuple[np.ndarray, dict]:
-    """D_c commands that track the targets, optimised through the MJX rollout.
-
-    The commands are p_min + (p_max - p_min) * sigmoid(z); z starts at the init commands (clipped
-    0.01% inside the range) and Adam minimises mean(X_err_cm^2) + w^2 mean(phi_err^2), with
-    phi_err^2 ~ 2 (1 - cos). Several programs are optimised at once (one vmapped rollout; Adam
-    acts elementwise, so each program's iterates are those of its own optimisation), and each
-    program's best iterate is returned.
-
-    A held program keeps one command per source step, held k control periods, as every
-    translator's output is: its gradient is summed over each step's k periods, so from a held
-    start (the stretch program) Adam's iterates are exactly those of Adam on the [T, 3] held
-    commands. A free program has a command per control period.
-
-    Args:
-      arm_c: the D_c arm.
-      target_poses: [T, 6] or [S, T, 6] target poses (m, unit d3).
-      init_commands: [T * k, 3] or [S, T * k, 3] starting commands (bar), e.g. the stretch
-        program.
-      k: control periods per source step.
-      cfg: oracle settings.
-      held: bool, or [S] bools: which programs are held (each init program must then be
-        constant over each source step's k periods).
-      progress: show a progress bar over Adam steps (the first compiles: minutes).
-
-    Returns:
-      (commands [T * k, 3] or [S, T * k, 3] bar, info: "loss_history" [steps] or [steps, S]
-      (the loss of each iterate), "best_loss" (float or [S]), "wall_s", "step_wall_s" (per
-      Adam step; the first includes compiling)).
-    """
-    import jax
-    import jax.numpy as jnp
-    import optax
-
-    from ccgan.losses import tracking_loss
-
-    single = np.ndim(target_poses) == 2
-    targets = np.asarray(target_poses)[None] if single else np.asarray(target_poses)
-    inits = np.asarray(init_commands)[None] if single else np.asarray(init_commands)
-    if targets.shape[0] != inits.shape[0] or inits.shape[1] != targets.shape[1] * k:
-        raise ValueError(
-            f"targets {targets.shape} and init commands {inits.shape} do not match for k = {k}"
-        )
-    held = np.broadcast_to(np.asarray(held, bool), inits.shape[:1])
-    blocks = inits[held].reshape(-1, targets.shape[1], k, inits.shape[-1])
-    if not np.allclose(blocks, blocks[:, :, :1]):
-        raise ValueError(
-            "a held program's init commands must be constant over each step's k periods"
-        )
-    lo, hi = arm_c.valve.p_min_bar, arm_c.valve.p_max_bar
-    # Inits at a valve limit start just inside it (the sigmoid never reaches its ends); Adam's
-    # normalised steps move them out again however flat the sigmoid is there.
-    frac = np.clip((inits - lo) / (hi - lo), 1e-4, 1 - 1e-4)
-    z0 = jnp.asarray(np.log(frac / (1 - frac)), dtype=jnp.float32)
-    target = jnp.asarray(targets, dtype=jnp.float32)
-    rollout = jax.vmap(arm_c.rollout_fn(), in_axes=(None, 0))
-    mjx_model = arm_c.mjx_model
-    w = cfg.orientation_weight_cm_per_rad
-    held_mask = jnp.asarray(held)[:, None, None]
-
-    def project(grad):
-        """Held programs' gradients [S, T * k, 3] summed over each step's k periods."""
-        per_step = grad.reshape(grad.shape[0], -1, k, grad.shape[-1]).sum(2)
-        return jnp.where(held_mask, jnp.repeat(per_step, k, axis=1), grad)
-
-    def commands_of(z):
-        return lo + (hi - lo) * jax.nn.sigmoid(z)
-
-    def losses_of(z):
-        """[S] loss of each program."""
-        poses, ok = rollout(mjx_model, commands_of(z))
-        loss = tracking_loss(poses[:, k - 1 :: k], target, w)
-        return jnp.where(ok[:, -1], loss, jnp.inf)
-
-    # The step size is state, not a constant of the compiled step: one compilation (and the
-    # persistent cache) serves every learning rate.
-    opt = optax.inject_hyperparams(optax.adam)(learning_rate=cfg.learning_rate)
-
-    @jax.jit
-    def update(z, opt_state):
-        # The programs are independent: pulling back ones gives each its own gradient.
-        loss, pullback = jax.vjp(losses_of, z)
-        (grad,) = pullback(jnp.ones_like(loss))
-        grad = project(grad)
-        updates, opt_state = opt.update(grad, opt_state, z)
-        return optax.apply_updates(z, updates), opt_state, loss
-
-    t0 = time.perf_counter()
-    z, opt_state = z0, opt.init(z0)
-    best_z, best_loss, history, step_wall_s = z0, np.full(z0.shape[0], np.inf), [], []
-    steps = tqdm(
-        range(cfg.steps),
-        desc="oracle Adam steps (the 1st compiles)",
-        unit="step",
-        disable=not progress,
-    )
-    for _ in steps:
-        t_step = time.perf_counter()
-        new_z, opt_state, loss = update(z, opt_state)
-        loss = np.asarray(loss)  # the loss of z, before this update
-        step_wall_s.append(time.perf_counter() - t_step)
-        history.append(loss)
-        better = loss < best_loss
-        best_z = jnp.where(jnp.asarray(better)[:, None, None], z, best_z)
-        best_loss = np.where(better, loss, best_loss)
-        z = new_z
-        steps.set_postfix(best_loss_max=f"{best_loss.max():.4g}", refresh=False)
-    commands = np.asarray(commands_of(best_z), dtype=np.float64)
-    history = np.asarray(history).reshape(len(history), z0.shape[0])
-    info = {
-        "loss_history": history[:, 0].tolist() if single else history.tolist(),
-        "best_loss": float(best_loss[0]) if single else best_loss.tolist(),
-        "wall_s": time.perf_counter() - t0,
-        "step_wall_s": step_wall_s,
-    }
-    return (commands[0] if single else commands), info
-
-
 # --------------------------------------------------------------------------------- evaluation
 
 
@@ -726,7 +474,7 @@ def add_noise(pressures_bar: np.ndarray, std: float, seed: int) -> np.ndarray:
     them at 0.2 bar).
     """
     rng = np.random.default_rng(seed)
-    scale = shapes.P_HIGH_BAR
+    scale = programs.P_HIGH_BAR
     noisy = np.asarray(pressures_bar) / scale + rng.normal(0.0, std, np.shape(pressures_bar))
     return np.clip(noisy, 0.0, 1.0) * scale
 
@@ -856,7 +604,10 @@ def evaluate(cfg: EvalConfig, command: str = "", log=print) -> dict:
     k_stretch, k_errors = 1, {}
     if "stretch" in methods or "oracle" in methods or "mpc" in methods:
         t0 = time.perf_counter()
-        k_stretch, k_errors = choose_stretch_k(arm_s, arm_c, cfg)
+        p_val = programs.validation_program(cfg.validation_duration_s)
+        k_stretch, k_errors = choose_stretch_k(
+            arm_s, arm_c, p_val, cfg.stretch_candidates, cfg.backend
+        )
         timings["choose_k_s"] = time.perf_counter() - t0
         log(f"stretch k = {k_stretch} (validation X_err cm by k: {k_errors})")
 
@@ -877,9 +628,9 @@ def evaluate(cfg: EvalConfig, command: str = "", log=print) -> dict:
 
     # Targets first: the oracle optimises every shape at once (one vmapped MJX rollout).
     t0 = time.perf_counter()
-    programs = {shape: shapes.SHAPES[shape](cfg.duration_s) for shape in cfg.shapes}
+    sources = {shape: programs.SHAPES[shape](cfg.duration_s) for shape in cfg.shapes}
     target_list = rollout_grouped(
-        arm_s, [(programs[s], 1) for s in cfg.shapes], cfg.backend, "D_s targets"
+        arm_s, [(sources[s], 1) for s in cfg.shapes], cfg.backend, "D_s targets"
     )
     targets = dict(zip(cfg.shapes, target_list, strict=True))
     timings["targets_s"] = time.perf_counter() - t0
@@ -893,19 +644,17 @@ def evaluate(cfg: EvalConfig, command: str = "", log=print) -> dict:
         n_steps = min(t.shape[0] for t in targets.values())
         horizon = n_steps
         if cfg.oracle.horizon_s is not None:
-            horizon = max(1, min(n_steps, int(round(cfg.oracle.horizon_s * shapes.CONTROL_HZ))))
+            horizon = max(1, min(n_steps, int(round(cfg.oracle.horizon_s * programs.CONTROL_HZ))))
         oracle_targets = np.stack([targets[s][:horizon] for s in cfg.shapes])
-        oracle_sources = np.stack([programs[s][:horizon] for s in cfg.shapes])
+        oracle_sources = np.stack([sources[s][:horizon] for s in cfg.shapes])
+        t0 = time.perf_counter()
+        oracle_init = oracle_lib.start_commands(
+            arm_c, oracle_targets, oracle_sources, k_stretch, cfg.oracle, progress=True
+        )
         if cfg.oracle.init == "mpc":
-            t0 = time.perf_counter()
-            oracle_init, _ = mpc.track(
-                arm_c, oracle_targets, k_stretch, oracle_sources, progress=True
-            )
             timings["oracle_init_s"] = time.perf_counter() - t0
-        else:
-            oracle_init = stretch(oracle_sources, k_stretch)
         oracle_future = _InThread(
-            oracle_commands,
+            oracle_lib.oracle_commands,
             arm_c,
             oracle_targets,
             oracle_init,
@@ -922,7 +671,7 @@ def evaluate(cfg: EvalConfig, command: str = "", log=print) -> dict:
             arm_c,
             np.stack([targets[s] for s in cfg.shapes]),
             k_stretch,
-            np.stack([programs[s] for s in cfg.shapes]),
+            np.stack([sources[s] for s in cfg.shapes]),
             progress=True,
         )
         mpc_commands.update(zip(cfg.shapes, every, strict=True))
@@ -938,7 +687,7 @@ def evaluate(cfg: EvalConfig, command: str = "", log=print) -> dict:
         m for m in ("stretch", *TRANSLATOR_METHODS) if m in methods and cfg.robustness
     ]
     for shape in cfg.shapes:
-        p_s, target = programs[shape], targets[shape]
+        p_s, target = sources[shape], targets[shape]
         for method in translated:
             for seed in seeds_for(method):
                 specs.append((("table", shape, method, seed), method, p_s, target, seed))
@@ -994,7 +743,7 @@ def evaluate(cfg: EvalConfig, command: str = "", log=print) -> dict:
     table: dict[str, dict] = {}
     trajectories: dict[str, dict] = {}
     for shape in cfg.shapes:
-        p_s, target = programs[shape], targets[shape]
+        p_s, target = sources[shape], targets[shape]
         traj = {"pressures_s": p_s, "target": target, "poses": {}, "commands": {}, "k": {}}
         rows = {}
         oracle_summary = None
@@ -1384,10 +1133,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument(
         "--shapes",
         nargs="+",
-        default=list(shapes.SHAPES),
-        choices=list(shapes.SHAPES),
+        default=list(programs.SHAPES),
+        choices=list(programs.SHAPES),
         metavar="SHAPE",
-        help=f"shapes to track, of {', '.join(shapes.SHAPES)}",
+        help=f"shapes to track, of {', '.join(programs.SHAPES)}",
     )
     p.add_argument(
         "--methods",

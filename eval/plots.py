@@ -10,7 +10,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from eval.shapes import CONTROL_HZ  # noqa: E402
+from mjx_arm.constants import CONTROL_HZ  # noqa: E402
 
 CM = 100.0
 COLORS = {

@@ -1,247 +1,63 @@
-"""Pressure programs that make the arm's tip trace the paper's five test shapes in D_s.
+"""The evaluation's command line and its five test shapes.
 
-Each program is a [T, 3] array of chamber commands (bar) at 10 Hz (T = 10 * duration_s), inside
-the valve range [0.2, 3.5] bar. The shapes are made in "bending space": a planar bending vector
-b(t) (dimensionless, |b| <= 1 keeps every chamber in range) is turned into chamber pressures by
+`python -m eval.shapes` scores every method on the paper's five shapes in the D_c simulator (this
+module's `main`; `python -m eval.shapes --help` lists the options, `eval.pipeline` does the work).
 
-    p_i(t) = P_MID + AMPLITUDE * (2/3) * 3/2 * (b(t) . u_i),  u_i = (cos theta_i, sin theta_i),
-
-with theta_i = 0, 120, 240 deg the chamber angles. Since sum_i u_i u_i^T = 3/2 I, the mean of the
-three pressures stays at P_MID (no net stretch) and the bending direction follows b(t); the tip
-then traces a (rotated, lagged) copy of b(t)'s path in the XY plane. For the circle this is exactly
-the paper's recipe: three sinusoids with phases 0/120/240 deg, period 30 s (two turns in 60 s).
-
-Signal types, as in the paper's "sinusoid, ramp, staircase and phase changes":
-  circle         sinusoids, phases 0/120/240 deg, period 30 s
-  rectangle      piecewise-linear ramps along a 2:1 rectangle, one lap per 30 s
-  damped_circle  sinusoids under an exponential envelope (a spiral inward), period 30 s
-  ellipse        sinusoids of unequal amplitude and shifted phases (2:1 ellipse), period 30 s
-  kite           staircase: the kite's edges quantised into 1 s steps, one lap per 30 s
-
-Run `python -m eval.shapes --help` for the evaluation CLI (this module's `main`).
+The pressure programs themselves are pure functions of time and live below every layer that
+draws them, in `mjx_arm.programs` (the circle, rectangle, damped circle, ellipse and kite, each
+a [T, 3] array of chamber commands in bar at 10 Hz; the validation program; the random
+shape-like programs of the fine-tunes). They are re-exported here under their old names, for
+users of `eval.shapes`.
 """
 
 from __future__ import annotations
 
-import math
-import zlib
-from collections.abc import Callable
+from mjx_arm.programs import (
+    AMPLITUDE_BAR,
+    CHAMBER_ANGLES_RAD,
+    CONTROL_HZ,
+    P_HIGH_BAR,
+    P_LOW_BAR,
+    P_MID_BAR,
+    PERIOD_S,
+    PERIODIC_SHAPES,
+    SHAPE_LIKE_KINDS,
+    SHAPES,
+    circle,
+    damped_circle,
+    ellipse,
+    kite,
+    pressures_from_bend,
+    rectangle,
+    shape_like_program,
+    shape_like_programs,
+    times_s,
+    validation_program,
+)
 
-import numpy as np
-
-#: Control rate of the programs (Hz).
-CONTROL_HZ = 10.0
-#: Valve range (bar): every program stays inside [P_LOW, P_HIGH].
-P_LOW_BAR = 0.2
-P_HIGH_BAR = 3.5
-#: Mean chamber pressure of every program (bar): the middle of the valve range.
-P_MID_BAR = 0.5 * (P_LOW_BAR + P_HIGH_BAR)
-#: Pressure swing (bar) for |b| = 1; 0.98 of the half range keeps a margin to the valve limits.
-AMPLITUDE_BAR = 0.98 * 0.5 * (P_HIGH_BAR - P_LOW_BAR)
-#: Period of one lap of every shape (s): the paper's circle period.
-PERIOD_S = 30.0
-#: Chamber angles around the arm's axis (rad).
-CHAMBER_ANGLES_RAD = np.deg2rad([0.0, 120.0, 240.0])
-
-
-def times_s(duration_s: float) -> np.ndarray:
-    """Command times [T] (s), T = round(10 * duration_s), starting at 0."""
-    n = int(round(duration_s * CONTROL_HZ))
-    if n <= 0:
-        raise ValueError(f"duration_s must give at least one command, got {duration_s}")
-    return np.arange(n) / CONTROL_HZ
-
-
-def pressures_from_bend(bend: np.ndarray) -> np.ndarray:
-    """Chamber commands [T, 3] (bar) for bending vectors [T, 2] with |b| <= 1.
-
-    For |b| <= 1, |b . u_i| <= 1, so every command lies in P_MID +- AMPLITUDE, inside the range.
-    """
-    bend = np.asarray(bend, dtype=np.float64)
-    u = np.stack([np.cos(CHAMBER_ANGLES_RAD), np.sin(CHAMBER_ANGLES_RAD)], axis=-1)  # [3, 2]
-    return P_MID_BAR + AMPLITUDE_BAR * bend @ u.T
-
-
-def _polygon_path(vertices: np.ndarray, phase: np.ndarray) -> np.ndarray:
-    """Points [T, 2] at constant speed along a closed polygon [V, 2], phase in laps [T]."""
-    closed = np.concatenate([vertices, vertices[:1]], axis=0)
-    edges = np.linalg.norm(np.diff(closed, axis=0), axis=-1)
-    cum = np.concatenate([[0.0], np.cumsum(edges)]) / edges.sum()
-    s = np.mod(phase, 1.0)
-    x = np.interp(s, cum, closed[:, 0])
-    y = np.interp(s, cum, closed[:, 1])
-    return np.stack([x, y], axis=-1)
-
-
-def circle(duration_s: float = 60.0) -> np.ndarray:
-    """Circle: p_i = P_MID + A sin(2 pi t / 30 s - phi_i), phi_i = 0, 120, 240 deg.
-
-    Returns:
-      [T, 3] commands (bar), T = 10 * duration_s; exactly periodic with period 30 s.
-    """
-    t = times_s(duration_s)
-    w = 2.0 * math.pi * t / PERIOD_S
-    return np.stack(
-        [P_MID_BAR + AMPLITUDE_BAR * np.sin(w - phi) for phi in CHAMBER_ANGLES_RAD], axis=-1
-    )
-
-
-def rectangle(duration_s: float = 60.0) -> np.ndarray:
-    """Rectangle (2:1): linear ramps of the bending vector between four corners, 30 s per lap.
-
-    Returns:
-      [T, 3] commands (bar), periodic with period 30 s.
-    """
-    t = times_s(duration_s)
-    half = np.array([0.85, 0.425])
-    corners = np.array([[1, 1], [-1, 1], [-1, -1], [1, -1]]) * half
-    return pressures_from_bend(_polygon_path(corners, t / PERIOD_S))
-
-
-def damped_circle(duration_s: float = 60.0, decay_s: float = 45.0) -> np.ndarray:
-    """Damped circle: the circle's sinusoids under the envelope exp(-t / decay_s) (inward spiral).
-
-    Returns:
-      [T, 3] commands (bar); not periodic (the radius shrinks by exp(-60/45) ~ 0.26 in 60 s).
-    """
-    t = times_s(duration_s)
-    w = 2.0 * math.pi * t / PERIOD_S
-    r = np.exp(-t / decay_s)
-    bend = np.stack([r * np.cos(w), r * np.sin(w)], axis=-1)
-    return pressures_from_bend(bend)
-
-
-def ellipse(duration_s: float = 60.0) -> np.ndarray:
-    """Ellipse (2:1, major axis at 30 deg): sinusoids of unequal amplitude and phase, 30 s period.
-
-    Returns:
-      [T, 3] commands (bar), periodic with period 30 s.
-    """
-    t = times_s(duration_s)
-    w = 2.0 * math.pi * t / PERIOD_S
-    a, b, tilt = 1.0, 0.5, math.radians(30.0)
-    local = np.stack([a * np.cos(w), b * np.sin(w)], axis=-1)
-    rot = np.array([[math.cos(tilt), -math.sin(tilt)], [math.sin(tilt), math.cos(tilt)]])
-    return pressures_from_bend(local @ rot.T)
-
-
-def kite(duration_s: float = 60.0, step_s: float = 1.0) -> np.ndarray:
-    """Kite: a staircase (the path sampled and held every `step_s`) along a kite, 30 s per lap.
-
-    Returns:
-      [T, 3] commands (bar), periodic with period 30 s (30 stairs per lap).
-    """
-    t = times_s(duration_s)
-    held = np.floor(t / step_s) * step_s
-    vertices = np.array([[0.0, 0.95], [0.55, 0.3], [0.0, -0.95], [-0.55, 0.3]])
-    return pressures_from_bend(_polygon_path(vertices, held / PERIOD_S))
-
-
-def validation_program(duration_s: float = 20.0, seed: int = 1234) -> np.ndarray:
-    """A smooth pseudo-random program [T, 3] (bar) for choosing the stretch factor k.
-
-    Not one of the test shapes: a sum of three random sinusoids per bending axis with periods
-    4-20 s, scaled so |b| <= 1. Used only to select k, never to report errors.
-    """
-    rng = np.random.default_rng(seed)
-    t = times_s(duration_s)
-    bend = np.zeros((t.size, 2))
-    for axis in range(2):
-        for _ in range(3):
-            period = rng.uniform(4.0, 20.0)
-            bend[:, axis] += rng.uniform(0.3, 1.0) * np.sin(
-                2 * math.pi * t / period + rng.uniform(0, 2 * math.pi)
-            )
-    bend /= max(1.0, np.linalg.norm(bend, axis=-1).max())
-    return pressures_from_bend(bend)
-
-
-#: Kinds of `shape_like_program`.
-SHAPE_LIKE_KINDS = ("ellipse", "polygon", "staircase", "phase_jumps")
-
-
-def shape_like_program(
-    rng: np.random.Generator, duration_s: float, full_scale: bool = False
-) -> np.ndarray:
-    """One random program [T, 3] (bar, float32) of the shapes' signal types, never a test shape.
-
-    The bending vector follows a random closed path at a random lap period, from a random phase:
-      ellipse      sinusoids: an ellipse of random axes and tilt, half of them under a decaying
-                   envelope exp(-t / tau), tau in [20, 120] s (spirals)
-      polygon      ramps at constant speed along a random polygon of 3-6 vertices
-      staircase    the polygon path sampled and held every 0.5-3 s
-      phase_jumps  a circle of random radius whose phase jumps 1-3 times by up to +-180 deg
-    Lap periods are uniform in [10, 60] s, direction either way. Half of the programs add a
-    common-mode offset m in [-0.3, 0.3] (all three chambers up or down); the path is scaled so
-    |m| + |b| <= 1, which keeps every command in P_MID +- AMPLITUDE, inside the valve range.
-
-    With `full_scale` the path is scaled up to that limit (its largest bend reaches
-    1 - |m|), as the test shapes' programs are; the random draws are the same.
-
-    Used to fine-tune and validate translators on programs like the test shapes (slow, smooth
-    or stepped, starting away from rest) without ever using the five shapes themselves.
-    """
-    t = times_s(duration_s)
-    kind = SHAPE_LIKE_KINDS[rng.integers(len(SHAPE_LIKE_KINDS))]
-    period_s = rng.uniform(10.0, 60.0)
-    laps = rng.choice([-1.0, 1.0]) * t / period_s + rng.uniform(0.0, 1.0)
-    if kind == "ellipse":
-        a = rng.uniform(0.3, 1.0)
-        b = a * rng.uniform(0.0, 1.0)
-        tilt = rng.uniform(0.0, math.pi)
-        w = 2.0 * math.pi * laps
-        local = np.stack([a * np.cos(w), b * np.sin(w)], axis=-1)
-        rot = np.array([[math.cos(tilt), -math.sin(tilt)], [math.sin(tilt), math.cos(tilt)]])
-        bend = local @ rot.T
-        if rng.uniform() < 0.5:
-            bend *= np.exp(-t / rng.uniform(20.0, 120.0))[:, None]
-    elif kind in ("polygon", "staircase"):
-        n = int(rng.integers(3, 7))
-        gaps = rng.uniform(0.5, 1.5, size=n)
-        angles = rng.uniform(0.0, 2.0 * math.pi) + 2.0 * math.pi * np.cumsum(gaps) / gaps.sum()
-        radii = rng.uniform(0.4, 1.0, size=n)
-        vertices = radii[:, None] * np.stack([np.cos(angles), np.sin(angles)], axis=-1)
-        if kind == "staircase":
-            step_s = rng.uniform(0.5, 3.0)
-            held = np.floor(t / step_s) * step_s
-            laps = np.interp(held, t, laps)
-        bend = _polygon_path(vertices, laps)
-    else:
-        jumps = np.sort(rng.uniform(0.0, t[-1] + 1e-9, size=int(rng.integers(1, 4))))
-        shift = rng.uniform(-0.5, 0.5, size=jumps.size)
-        phase = laps + np.where(jumps[None, :] <= t[:, None], shift[None, :], 0.0).sum(axis=1)
-        w = 2.0 * math.pi * phase
-        bend = rng.uniform(0.3, 1.0) * np.stack([np.cos(w), np.sin(w)], axis=-1)
-    offset = rng.uniform(-0.3, 0.3) if rng.uniform() < 0.5 else 0.0
-    peak = np.linalg.norm(bend, axis=-1).max()
-    bend *= (1.0 - abs(offset)) / (max(peak, 1e-9) if full_scale else max(1.0, peak))
-    return (pressures_from_bend(bend) + AMPLITUDE_BAR * offset).astype(np.float32)
-
-
-def shape_like_programs(
-    n: int, duration_s: float, seed: int = 0, split: str = "train", full_scale: bool = False
-) -> np.ndarray:
-    """[n, T, 3] `shape_like_program`s (bar, float32); program i of a split draws from
-    ``np.random.default_rng([seed, crc32("shape_like/" + split), i])``, whatever n is."""
-    stream = zlib.crc32(f"shape_like/{split}".encode()) & 0x7FFFFFFF
-    return np.stack(
-        [
-            shape_like_program(np.random.default_rng([seed, stream, i]), duration_s, full_scale)
-            for i in range(n)
-        ]
-    )
-
-
-#: Shape name -> program function(duration_s=60.0) -> [T, 3] commands (bar).
-SHAPES: dict[str, Callable[..., np.ndarray]] = {
-    "circle": circle,
-    "rectangle": rectangle,
-    "damped_circle": damped_circle,
-    "ellipse": ellipse,
-    "kite": kite,
-}
-#: Shapes whose programs repeat every PERIOD_S.
-PERIODIC_SHAPES = ("circle", "rectangle", "ellipse", "kite")
+__all__ = [
+    "AMPLITUDE_BAR",
+    "CHAMBER_ANGLES_RAD",
+    "CONTROL_HZ",
+    "PERIODIC_SHAPES",
+    "PERIOD_S",
+    "P_HIGH_BAR",
+    "P_LOW_BAR",
+    "P_MID_BAR",
+    "SHAPES",
+    "SHAPE_LIKE_KINDS",
+    "circle",
+    "damped_circle",
+    "ellipse",
+    "kite",
+    "main",
+    "pressures_from_bend",
+    "rectangle",
+    "shape_like_program",
+    "shape_like_programs",
+    "times_s",
+    "validation_program",
+]
 
 
 def main(argv: list[str] | None = None) -> None:

@@ -20,7 +20,8 @@ import numpy as np
 import mjx_arm
 from bench import run_header
 from ccgan import load_translator
-from eval import metrics, pipeline, shapes
+from mjx_arm.programs import CONTROL_HZ, SHAPES
+from tracking import held, metrics
 
 
 def main(argv=None) -> None:
@@ -31,19 +32,19 @@ def main(argv=None) -> None:
     p.add_argument("--out", required=True, help="output prefix (writes .json and .md)")
     a = p.parse_args(argv)
     arm_s, arm_c = mjx_arm.load(domain="source"), mjx_arm.load(domain="constrained")
-    head = int(round(a.window * shapes.CONTROL_HZ))
+    head = int(round(a.window * CONTROL_HZ))
     translators = {
         folder: [load_translator(Path(folder) / f"translator_seed{s}.ckpt") for s in a.seeds]
         for folder in a.folders
     }
     rows = {}
-    for name, fn in shapes.SHAPES.items():
+    for name, fn in SHAPES.items():
         program = fn(60.0)
         target = arm_s.rollout(program, backend="c")
         rows[name] = {}
         for folder in a.folders:
             jobs = [tr.translate(program, target) for tr in translators[folder]]
-            poses = pipeline.rollout_grouped(arm_c, jobs, "c")
+            poses = held.rollout_grouped(arm_c, jobs, "c")
             err = np.stack([metrics.position_error_cm(x, target) for x in poses])
             rows[name][folder] = {
                 "x_err_cm_window": float(err[:, :head].mean()),

@@ -1,9 +1,9 @@
 """Where the oracle starts and how fast it steps: stretch or mpc start, Adam step sizes.
 
-For each (start, learning rate), runs `eval.pipeline.oracle_commands` on the first `--horizon`
+For each (start, learning rate), runs `tracking.oracle.oracle_commands` on the first `--horizon`
 seconds of the chosen shapes (held commands, k = 10) and reports the loss of every iterate,
 the best loss and the X_err (cm) of the returned commands in MuJoCo C. The mpc start is
-`eval.mpc.track`'s commands (the oracle's default start).
+`tracking.mpc.track`'s commands (the oracle's default start).
 
     python -m studies.oracle_start --shapes circle --steps 10 \\
         --runs stretch:0.3 mpc:0.3 mpc:0.03 --out studies/results/cpu/oracle_start
@@ -19,12 +19,14 @@ import numpy as np
 
 import mjx_arm
 from bench import run_header
-from eval import metrics, mpc, pipeline, shapes
+from mjx_arm.programs import CONTROL_HZ, SHAPES
+from tracking import held, metrics, mpc
+from tracking.oracle import OracleConfig, oracle_commands
 
 
 def main(argv=None) -> None:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    p.add_argument("--shapes", nargs="+", default=["circle"], choices=list(shapes.SHAPES))
+    p.add_argument("--shapes", nargs="+", default=["circle"], choices=list(SHAPES))
     p.add_argument("--horizon", type=float, default=2.0, help="seconds optimised")
     p.add_argument("--steps", type=int, default=10)
     p.add_argument("--runs", nargs="+", default=["mpc:0.3", "mpc:0.03"], help="start:lr pairs")
@@ -32,19 +34,19 @@ def main(argv=None) -> None:
     a = p.parse_args(argv)
     k = 10
     arm_s, arm_c = mjx_arm.load(domain="source"), mjx_arm.load(domain="constrained")
-    n = int(round(a.horizon * shapes.CONTROL_HZ))
-    programs = np.stack([shapes.SHAPES[s](60.0)[:n] for s in a.shapes])
+    n = int(round(a.horizon * CONTROL_HZ))
+    programs = np.stack([SHAPES[s](60.0)[:n] for s in a.shapes])
     targets = arm_s.rollout(programs, backend="c")
-    starts = {"stretch": pipeline.stretch(programs, k)}
+    starts = {"stretch": held.stretch(programs, k)}
     if any(run.startswith("mpc:") for run in a.runs):
         starts["mpc"], _ = mpc.track(arm_c, targets, k, programs)
     rows = []
     for run in a.runs:
         start, lr = run.split(":")
-        cfg = pipeline.OracleConfig(steps=a.steps, learning_rate=float(lr), init=start)
-        cmds, info = pipeline.oracle_commands(arm_c, targets, starts[start], k, cfg, held=True)
-        x_start = metrics.position_error_cm(pipeline.run_dc(arm_c, starts[start], k, "c"), targets)
-        x_best = metrics.position_error_cm(pipeline.run_dc(arm_c, cmds, k, "c"), targets)
+        cfg = OracleConfig(steps=a.steps, learning_rate=float(lr), init=start)
+        cmds, info = oracle_commands(arm_c, targets, starts[start], k, cfg, held=True)
+        x_start = metrics.position_error_cm(held.run_dc(arm_c, starts[start], k, "c"), targets)
+        x_best = metrics.position_error_cm(held.run_dc(arm_c, cmds, k, "c"), targets)
         rows.append(
             {
                 "start": start,

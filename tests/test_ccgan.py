@@ -19,6 +19,7 @@ from ccgan import checkpoint, losses, models
 from ccgan import data as data_lib
 from ccgan import forward as forward_lib
 from ccgan import train as train_lib
+from tracking import metrics
 
 # ----------------------------------------------------------------------------- data
 
@@ -187,8 +188,8 @@ def test_cycle_identity_feedback_and_errors_by_hand():
     pred = jnp.array([0.03, 0.04, 0.0, 1.0, 0.0, 0.0])
     target = jnp.array([0.0, 0.0, 0.0, 0.0, 2.0, 0.0])  # d3 need not be unit for the cosine
     # ||(3, 4, 0) cm|| = 5 cm; d3 at right angles: pi / 2.
-    assert losses.position_error_cm(pred, target) == pytest.approx(5.0, rel=1e-5)
-    assert losses.orientation_error_rad(pred, target) == pytest.approx(math.pi / 2, rel=1e-5)
+    assert metrics.position_error_cm(pred, target) == pytest.approx(5.0, rel=1e-5)
+    assert metrics.orientation_error_rad(pred, target) == pytest.approx(math.pi / 2, rel=1e-5)
 
 
 def test_one_adamw_step_lowers_forward_loss():
@@ -390,6 +391,7 @@ def test_two_devices_train_like_one(tiny_setup, tmp_path):
 import dataclasses, pickle, numpy as np
 import mjx_arm, jax
 from ccgan import train as train_lib
+from tracking import metrics
 assert len(jax.devices()) == 2
 data, fconf, fparams = pickle.loads(open({str(tmp_path / "setup.pkl")!r}, "rb").read())
 config = train_lib.TrainConfig(**{config.to_dict()!r})

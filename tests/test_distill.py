@@ -1,4 +1,4 @@
-"""Tests of ccgan.distill: G_c trained to imitate eval.mpc's commands (CPU, tiny)."""
+"""Tests of ccgan.distill: G_c trained to imitate tracking.mpc's commands (CPU, tiny)."""
 
 import dataclasses
 
@@ -10,8 +10,8 @@ import mjx_arm
 from ccgan import checkpoint, distill, load_translator
 from ccgan.finetune import x_err_cm_c
 from ccgan.translator import translator_path
-from eval import shapes
 from mjx_arm import constants
+from mjx_arm.programs import shape_like_programs
 
 TINY = distill.DistillConfig(
     n_train=4, n_val=2, duration_s=1.0, epochs=4, batch_size=2, eval_every=2, learning_rate=3e-3
@@ -95,7 +95,7 @@ def test_distill_imitates_the_teacher_and_caches_it(arms, tmp_path):
     )  # fmt: skip
     assert both["p_train"].shape[0] == 7 and both["p_val"].shape[0] == 2
     np.testing.assert_array_equal(both["c_train"][:5], more["c_train"])
-    full = shapes.shape_like_programs(2, 1.0, split="distill/train_full", full_scale=True)
+    full = shape_like_programs(2, 1.0, split="distill/train_full", full_scale=True)
     np.testing.assert_array_equal(both["p_train"][5:], full)
     assert len(both["teacher_val_x_err_cm"]) == 2
     # Other settings or a corrupt file: planned again, never mixed.

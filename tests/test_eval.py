@@ -1,4 +1,6 @@
-"""Tests of eval/: shape programs, metrics, and a tiny end-to-end run (3-segment arm, CPU)."""
+"""Tests of eval/: noise, replay, translators, the mpc and oracle rows, and tiny end-to-end runs
+(3-segment arm, CPU). The programs, metrics and trackers have their own tests (test_programs,
+test_tracking, test_tracking_mpc)."""
 
 import dataclasses
 import json
@@ -7,116 +9,17 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-import eval  # noqa: F401  (first: sets MUJOCO_GL before mujoco is imported)
 import mjx_arm  # (before jax)
-from ccgan.losses import tracking_loss
-from eval import metrics, mpc, pipeline, render, shapes
+from eval import pipeline, render
+from mjx_arm import programs
+from tracking import held, metrics, mpc
+from tracking.metrics import tracking_loss
+from tracking.oracle import OracleConfig
 
 
 @pytest.fixture(scope="module")
 def small_xml():
     return mjx_arm.generate_xml(dataclasses.replace(mjx_arm.ArmParams(), n_segments=3))
-
-
-@pytest.mark.parametrize("name", list(shapes.SHAPES))
-def test_shape_programs_in_valve_range(name):
-    p = shapes.SHAPES[name](60.0)
-    assert p.shape == (600, 3)
-    assert np.isfinite(p).all()
-    assert p.min() >= shapes.P_LOW_BAR and p.max() <= shapes.P_HIGH_BAR
-    # Every shape moves: each chamber swings by at least 1 bar.
-    assert (np.ptp(p, axis=0) > 1.0).all()
-
-
-@pytest.mark.parametrize("name", shapes.PERIODIC_SHAPES)
-def test_periodic_shapes_repeat_every_30_s(name):
-    p = shapes.SHAPES[name](60.0)
-    np.testing.assert_allclose(p[:300], p[300:], atol=1e-9)
-    assert not np.allclose(p[:150], p[150:300])  # ...and not with half the period
-
-
-def test_circle_is_three_phased_sinusoids():
-    p = shapes.circle(60.0)
-    t = np.arange(600) / 10.0
-    expected0 = shapes.P_MID_BAR + shapes.AMPLITUDE_BAR * np.sin(2 * np.pi * t / 30.0)
-    np.testing.assert_allclose(p[:, 0], expected0, atol=1e-12)
-    # Chamber 1 lags chamber 0 by 120 deg = 10 s = 100 steps.
-    np.testing.assert_allclose(p[100:, 1], p[:-100, 0], atol=1e-9)
-    # Phases 0/120/240: the mean pressure is constant (pure bending).
-    np.testing.assert_allclose(p.mean(axis=1), shapes.P_MID_BAR, atol=1e-9)
-
-
-def test_damped_circle_shrinks():
-    p = shapes.damped_circle(60.0)
-    assert np.ptp(p[-300:], axis=0).max() < 0.6 * np.ptp(p[:300], axis=0).max()
-
-
-def test_shape_like_programs_in_range_reproducible_and_never_a_test_shape():
-    p = shapes.shape_like_programs(64, 60.0, seed=3, split="train")
-    assert p.shape == (64, 600, 3) and p.dtype == np.float32 and np.isfinite(p).all()
-    lo, hi = shapes.P_MID_BAR - shapes.AMPLITUDE_BAR, shapes.P_MID_BAR + shapes.AMPLITUDE_BAR
-    assert p.min() >= lo - 1e-5 and p.max() <= hi + 1e-5
-    # Program i does not depend on how many are drawn; other seeds and splits differ.
-    np.testing.assert_array_equal(shapes.shape_like_programs(5, 60.0, seed=3)[:], p[:5])
-    assert not np.allclose(shapes.shape_like_programs(5, 60.0, seed=4), p[:5])
-    assert not np.allclose(shapes.shape_like_programs(5, 60.0, seed=3, split="val"), p[:5])
-    # Every program moves, and at least one is a staircase (holds for >= 5 steps at a time)
-    # and one is smooth (changes at every step).
-    assert (np.ptp(p, axis=1).max(axis=-1) > 0.05).all()
-    changes = np.abs(np.diff(p, axis=1)).max(axis=-1) > 1e-6  # [64, 599]
-    assert (changes.mean(axis=1) < 0.2).any() and changes.all(axis=1).any()
-    # Some add a common-mode offset (the mean pressure leaves P_MID), some do not.
-    mean_offset = np.abs(p.mean(axis=2) - shapes.P_MID_BAR).max(axis=1)
-    assert (mean_offset > 0.1).any() and (mean_offset < 1e-4).any()
-    # None is one of the five test shapes.
-    for fn in shapes.SHAPES.values():
-        assert np.abs(p - fn(60.0)[None]).max(axis=(1, 2)).min() > 0.1
-    # Full scale: the same draws scaled up to the amplitude limit, still in range.
-    full = shapes.shape_like_programs(64, 60.0, seed=3, split="train", full_scale=True)
-    assert full.min() >= lo - 1e-5 and full.max() <= hi + 1e-5
-    peak, peak_full = (np.abs(x - shapes.P_MID_BAR).max(axis=(1, 2)) for x in (p, full))
-    assert (peak_full >= peak - 1e-5).all() and (peak_full > peak + 0.1).mean() > 0.3
-
-
-def test_position_error_by_hand():
-    pred = np.array([[0.0, 0.0, 0.0, 0, 0, 1], [0.03, 0.04, 0.0, 0, 0, 1]])
-    target = np.zeros((2, 6))
-    target[:, 5] = 1.0
-    # ||(0.03, 0.04, 0)|| = 0.05 m = 5 cm.
-    np.testing.assert_allclose(metrics.position_error_cm(pred, target), [0.0, 5.0])
-
-
-def test_orientation_error_by_hand():
-    d3 = np.array([[0, 0, 1], [0, 1, 0], [0, 0, -1], [1, 1, 0]], dtype=float)
-    pred = np.concatenate([np.zeros((4, 3)), d3], axis=1)
-    target = np.tile([0, 0, 0, 0, 0, 1.0], (4, 1))
-    target[3, 3:] = [1, 0, 0]
-    # Same: 0; perpendicular: pi/2; opposite: pi; (1,1,0) unnormalised vs (1,0,0): 45 deg.
-    np.testing.assert_allclose(
-        metrics.orientation_error_rad(pred, target), [0, np.pi / 2, np.pi, np.pi / 4], atol=1e-7
-    )
-    # Rounding that pushes the cosine past 1 must not give NaN.
-    almost = np.array([[0, 0, 0, 0, 0, 1 + 1e-15]])
-    assert metrics.orientation_error_rad(almost, target[:1])[0] == 0.0
-
-
-def test_mean_std_and_summary():
-    assert metrics.mean_std([1.0, 3.0]) == (2.0, 1.0)
-    assert metrics.format_mean_std([1.0, 3.0]) == "2.00 ± 1.00"
-    reps = np.zeros((2, 4, 6))
-    reps[1, :, 0] = 0.02  # the two runs are 2 cm apart: each is 1 cm from the mean
-    spread = metrics.repetition_spread_cm(reps)
-    assert spread["spread_cm_mean"] == pytest.approx(1.0)
-    assert spread["spread_cm_max"] == pytest.approx(1.0)
-
-
-def test_stretch_and_every_kth():
-    p = np.arange(6.0).reshape(2, 3)
-    s = pipeline.stretch(p, 3)
-    assert s.shape == (6, 3)
-    np.testing.assert_array_equal(s[:3], np.tile(p[0], (3, 1)))
-    poses = np.arange(12.0)[:, None].repeat(6, axis=1)
-    np.testing.assert_array_equal(pipeline.every_kth(poses, 4)[:, 0], [3, 7, 11])
 
 
 def test_noise_is_clipped_and_zero_mean():
@@ -130,7 +33,7 @@ def test_noise_is_clipped_and_zero_mean():
 
 def test_replay_matches_rollout(small_xml):
     arm = mjx_arm.load(xml=small_xml, domain="source")
-    p = shapes.circle(2.0)
+    p = programs.circle(2.0)
     qpos, poses = render.replay(arm, p)
     np.testing.assert_allclose(poses, arm.rollout(p, backend="c"), atol=1e-12)
     # The joint positions are those of the poses: forward kinematics gives the same tip.
@@ -246,47 +149,6 @@ def test_default_translator_finds_its_trained_seeds(tmp_path, monkeypatch):
     assert bool(tr.trained_seeds) == committed.exists()
 
 
-def test_oracle_lowers_the_loss_and_batches_like_one_program(small_xml):
-    """Adam through the MJX rollout: better than its start, in the valve range, and two programs
-    optimised together get exactly the iterates each gets alone (Adam acts elementwise)."""
-    arm_s = mjx_arm.load(xml=small_xml, domain="source")
-    arm_c = mjx_arm.load(xml=small_xml, domain="constrained")
-    k, n = 2, 4
-    programs = [shapes.circle(3.0)[10 : 10 + n], shapes.kite(3.0)[10 : 10 + n]]
-    targets = np.stack([arm_s.rollout(p, backend="c") for p in programs])
-    inits = np.stack([pipeline.stretch(p, k) for p in programs])
-    cfg = pipeline.OracleConfig(steps=4, learning_rate=0.3)
-    both, info = pipeline.oracle_commands(arm_c, targets, inits, k, cfg)
-    assert both.shape == (2, n * k, 3)
-    lo, hi = arm_c.valve.p_min_bar, arm_c.valve.p_max_bar
-    assert both.min() >= lo and both.max() <= hi
-    history = np.asarray(info["loss_history"])
-    assert history.shape == (4, 2) and np.isfinite(history).all()
-    np.testing.assert_allclose(info["best_loss"], history.min(axis=0))
-    assert (history.min(axis=0) < history[0]).all()  # it improved on the stretch program
-    one, info_one = pipeline.oracle_commands(arm_c, targets[1], inits[1], k, cfg)
-    np.testing.assert_allclose(one, both[1], rtol=1e-5, atol=1e-6)
-    np.testing.assert_allclose(info_one["loss_history"], history[:, 1], rtol=1e-5)
-    # The tracking error of the returned commands in the C simulator is the optimised one.
-    poses = pipeline.run_dc(arm_c, one, k, "c")
-    x_err = metrics.position_error_cm(poses, targets[1])
-    stretch_err = metrics.position_error_cm(pipeline.run_dc(arm_c, inits[1], k, "c"), targets[1])
-    assert x_err.mean() < stretch_err.mean()
-    with pytest.raises(ValueError, match="do not match"):
-        pipeline.oracle_commands(arm_c, targets, inits[:, :-1], k, cfg)
-    # Held like a translator's output: one command per source step, still better than stretch,
-    # and no better than the free oracle, which can do everything the held one can.
-    held, info_held = pipeline.oracle_commands(arm_c, targets, inits, k, cfg, held=[True, False])
-    blocks = held[0].reshape(n, k, 3)
-    np.testing.assert_allclose(blocks, np.broadcast_to(blocks[:, :1], blocks.shape))
-    assert not np.allclose(both[0].reshape(n, k, 3), both[0].reshape(n, k, 3)[:, :1])
-    np.testing.assert_allclose(held[1], both[1], rtol=1e-5, atol=1e-6)  # free one untouched
-    h = np.asarray(info_held["loss_history"])[:, 0]
-    assert h.min() < h[0]
-    with pytest.raises(ValueError, match="constant over each step"):
-        pipeline.oracle_commands(arm_c, targets, both, k, cfg, held=True)
-
-
 def test_mpc_method_and_the_oracle_starting_from_it(small_xml, tmp_path, capsys):
     """The mpc row is the receding-horizon tracker's; the oracle starts from its commands."""
     cfg = pipeline.EvalConfig(
@@ -300,22 +162,22 @@ def test_mpc_method_and_the_oracle_starting_from_it(small_xml, tmp_path, capsys)
         plots=False,
         out_dir=str(tmp_path),
         xml=small_xml,
-        oracle=pipeline.OracleConfig(steps=2, learning_rate=0.01, horizon_s=0.5),
+        oracle=OracleConfig(steps=2, learning_rate=0.01, horizon_s=0.5),
     )
     data = pipeline.evaluate(cfg, command="test", log=lambda *_: None)
     arm_s, arm_c = pipeline.load_arms(cfg)
-    programs = np.stack([shapes.circle(1.0), shapes.kite(1.0)])
-    targets = arm_s.rollout(programs, backend="c")
-    commands, _ = mpc.track(arm_c, targets, 4, programs)
+    sources = np.stack([programs.circle(1.0), programs.kite(1.0)])
+    targets = arm_s.rollout(sources, backend="c")
+    commands, _ = mpc.track(arm_c, targets, 4, sources)
     for i, shape in enumerate(cfg.shapes):
         row = data["table"][shape]
-        err = metrics.tracking_errors(pipeline.run_dc(arm_c, commands[i], 4, "c"), targets[i])
+        err = metrics.tracking_errors(held.run_dc(arm_c, commands[i], 4, "c"), targets[i])
         np.testing.assert_allclose(row["mpc"]["x_err_cm_mean"], err["x_err_cm_mean"], rtol=1e-9)
         assert (
             row["mpc"]["k"] == 4 and row["mpc"]["x_err_cm_mean"] < row["stretch"]["x_err_cm_mean"]
         )
         # The oracle's first iterate is the mpc's first 0.5 s, so its loss is theirs.
-        head = pipeline.run_dc(arm_c, commands[i, :20], 4, "c")
+        head = held.run_dc(arm_c, commands[i, :20], 4, "c")
         start_loss = float(tracking_loss(head, targets[i, :5], 10.0))
         np.testing.assert_allclose(row["oracle"]["oracle_loss_first"], start_loss, rtol=1e-3)
         assert row["oracle"]["oracle_loss_best"] <= row["oracle"]["oracle_loss_first"]
@@ -323,7 +185,7 @@ def test_mpc_method_and_the_oracle_starting_from_it(small_xml, tmp_path, capsys)
     err = capsys.readouterr().err
     assert "oracle Adam steps" in err and "mpc" in err
     with pytest.raises(ValueError, match="oracle.init"):
-        pipeline.OracleConfig(init="zeros")
+        OracleConfig(init="zeros")
 
 
 def test_findings_count_shapes_and_ratios():

@@ -14,10 +14,10 @@ import numpy as np
 import pytest
 from PIL import Image
 
-import eval  # noqa: F401  (first: sets MUJOCO_GL before mujoco is imported)
 import mjx_arm  # noqa: F401  (before jax)
 from eval import pipeline, plots
 from mjx_arm import constants
+from tracking.oracle import OracleConfig
 
 ROOT = Path(__file__).resolve().parent.parent
 SHIPPED = ROOT / "results" / "ccgan" / "translator.ckpt"
@@ -177,7 +177,7 @@ def test_eval_config_refuses_bad_settings(in_tmp, kwargs, field):
 def test_oracle_config_refuses_bad_settings():
     for kwargs in ({"steps": 0}, {"learning_rate": 0.0}, {"horizon_s": 0.0}, {"init": "zeros"}):
         with pytest.raises(pipeline.ConfigError):
-            pipeline.OracleConfig(**kwargs)
+            OracleConfig(**kwargs)
 
 
 def test_help_names_the_program_and_shows_every_default():

@@ -103,7 +103,7 @@ def test_finetune_rejects_translators_with_different_k(arms):
 
 
 def test_finetune_program_families():
-    from eval.shapes import shape_like_programs
+    from mjx_arm.programs import shape_like_programs
 
     config = finetune.FinetuneConfig(programs="shape_like", window_s=1.0, seed=2)
     got = finetune.training_programs(config, 3, "val")
@@ -113,16 +113,3 @@ def test_finetune_program_families():
     assert babble.shape == got.shape and not np.allclose(babble, got)
     with pytest.raises(ValueError, match="programs must be one of"):
         finetune.FinetuneConfig(programs="shapes")
-
-
-def test_tracking_loss_by_hand():
-    """1 cm off and 0.1 rad tilted at one of two steps: (1 + 10^2 * 2 (1 - cos 0.1)) / 2."""
-    from ccgan.losses import tracking_loss
-
-    target = np.zeros((2, 6))
-    target[:, 5] = 1.0
-    poses = target.copy()
-    poses[1, 0] = 0.01
-    poses[1, 3:] = [np.sin(0.1), 0.0, np.cos(0.1)]
-    expected = (1.0 + 100.0 * 2.0 * (1.0 - np.cos(0.1))) / 2.0
-    np.testing.assert_allclose(float(tracking_loss(poses, target, 10.0)), expected, rtol=1e-5)

@@ -1,10 +1,11 @@
-"""Tests of eval.mpc (receding-horizon tracking in MuJoCo C) on a 3-segment arm."""
+"""Tests of tracking.mpc (receding-horizon tracking in MuJoCo C) on a 3-segment arm."""
 
 import numpy as np
 import pytest
 
 import mjx_arm
-from eval import metrics, mpc, pipeline, shapes
+from mjx_arm.programs import circle, kite
+from tracking import held, metrics, mpc
 
 
 @pytest.fixture(scope="module")
@@ -28,19 +29,19 @@ def test_residuals_by_hand():
 def test_mpc_tracks_better_than_stretch_and_stays_in_the_valve_range(arms):
     arm_s, arm_c = arms
     k = 10
-    programs = np.stack([shapes.circle(1.0), shapes.kite(1.0)])
+    programs = np.stack([circle(1.0), kite(1.0)])
     targets = arm_s.rollout(programs, backend="c")
     commands, info = mpc.track(arm_c, targets, k, programs)
     assert commands.shape == (2, 10 * k, 3) and info["cost"].shape == (2, 10)
     blocks = commands.reshape(2, 10, k, 3)
     np.testing.assert_array_equal(blocks, np.repeat(blocks[:, :, :1], k, axis=2))
     assert commands.min() >= arm_c.valve.p_min_bar and commands.max() <= arm_c.valve.p_max_bar
-    err_mpc = metrics.position_error_cm(pipeline.run_dc(arm_c, commands, k, "c"), targets)
-    stretched = pipeline.stretch(programs, k)
-    err_stretch = metrics.position_error_cm(pipeline.run_dc(arm_c, stretched, k, "c"), targets)
+    err_mpc = metrics.position_error_cm(held.run_dc(arm_c, commands, k, "c"), targets)
+    stretched = held.stretch(programs, k)
+    err_stretch = metrics.position_error_cm(held.run_dc(arm_c, stretched, k, "c"), targets)
     assert err_mpc.mean() < 0.5 * err_stretch.mean()
     # The reported cost is the applied step's squared residual, as a fresh rollout gives it.
-    poses = pipeline.run_dc(arm_c, commands, k, "c")
+    poses = held.run_dc(arm_c, commands, k, "c")
     np.testing.assert_allclose(
         info["cost"], (mpc.residuals(poses, targets, 10.0) ** 2).sum(-1), rtol=1e-9, atol=1e-12
     )

@@ -6,11 +6,12 @@ tracking residuals of those steps (finite-difference Jacobians, one batched `muj
 call per iteration, box limits by clipping and a short line search), applies the first command
 for k control periods, and moves on. The residual is [100 (x_c - x_s), w (d3_c - d3_s)] per
 step, so its squared norm is X_err_cm^2 + w^2 |d3_c - d3_s|^2 ~ the oracle's tracking loss
-(`ccgan.losses.tracking_loss`, with phi_err^2 ~ |d3_c - d3_s|^2 for unit vectors).
+(`tracking.metrics.tracking_loss`, with phi_err^2 ~ |d3_c - d3_s|^2 for unit vectors).
 
 Unlike a translator it needs the D_c simulator (or the real arm's model) at translation time;
 unlike the oracle it never sees more than `horizon_steps` of the future and needs no gradients.
-It gives the oracle a start (`eval.pipeline`) and the fine-tune a teacher (`ccgan.distill`).
+It gives the oracle a start (`tracking.oracle`, as `eval.pipeline` runs it) and the fine-tune a
+teacher (`ccgan.distill`).
 """
 
 from __future__ import annotations

@@ -1,0 +1,214 @@
+"""The oracle: D_c commands optimised directly through the differentiable MJX rollout.
+
+A lower reference for every translator: for known D_s target poses [T, 6] it searches the D_c
+commands [T * k, 3] (bar) that track them best, by Adam on `tracking.metrics.tracking_loss`
+through `mjx_arm`'s MJX rollout, with the commands kept in the valve range by a sigmoid. Like
+every translator's output, the commands are by default one per source step held k periods
+(`OracleConfig.held`). It starts from the receding-horizon tracker's commands (`tracking.mpc`)
+or the stretch program (`start_commands`). Gradients through thousands of MJX steps are slow,
+so the evaluation (`eval.pipeline`) optimises the first `OracleConfig.horizon_s` seconds only.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+
+import numpy as np
+from tqdm import tqdm
+
+from mjx_arm import constants
+from tracking import held as held_lib
+from tracking import metrics, mpc
+from tracking.config import ConfigError, check_duration, check_fields, check_ints, require
+
+
+@dataclasses.dataclass(frozen=True)
+class OracleConfig:
+    """Direct optimisation of D_c commands through MJX (the achievable-error reference)."""
+
+    steps: int = 30
+    """Adam steps (a few hundred on a GPU; the CPU default is small)."""
+    learning_rate: float = 0.03
+    """Adam step size on the sigmoid logits (dimensionless). From the mpc start 0.3 overshoots
+    (bench/oracle_start.py); the stretch-started tables of earlier commits used 0.3."""
+    horizon_s: float | None = 2.0
+    """Seconds of the source program optimised (None: all of it)."""
+    orientation_weight_cm_per_rad: float = 10.0
+    """How many cm of position error one rad of orientation error is worth in the loss."""
+    held: bool = True
+    """One command per source step held k periods, the output space of every translator
+    (False: a free command per control period)."""
+    init: str = "mpc"
+    """Where Adam starts: "mpc" (the receding-horizon tracker's commands, `tracking.mpc`) or
+    "stretch" (the stretch program)."""
+
+    def __post_init__(self):
+        """Refuses settings that would fail (or mean nothing) after minutes of work; fields are
+        named "oracle.<field>" in the ConfigError."""
+        require(
+            self.init in ("mpc", "stretch"),
+            "oracle.init",
+            f"must be 'mpc' or 'stretch', got {self.init!r}",
+        )
+        check_ints("oracle.steps", self.steps, 1)
+        if self.horizon_s is not None:
+            check_duration("oracle.horizon_s", self.horizon_s, constants.CONTROL_HZ)
+        try:
+            check_fields(
+                self, above={"learning_rate": 0}, at_least={"orientation_weight_cm_per_rad": 0}
+            )
+        except ConfigError as err:
+            raise ConfigError(f"oracle.{err.field}", err.problem) from None
+
+
+def start_commands(
+    arm_c,
+    target_poses: np.ndarray,
+    source_programs: np.ndarray,
+    k: int,
+    cfg: OracleConfig,
+    progress: bool = False,
+) -> np.ndarray:
+    """Where the oracle starts (`OracleConfig.init`): the receding-horizon tracker's commands
+    ("mpc", `tracking.mpc.track` in MuJoCo C) or the stretch program ("stretch").
+
+    Args:
+      arm_c: the D_c arm.
+      target_poses: [T, 6] or [S, T, 6] target poses (m, unit d3).
+      source_programs: [T, 3] or [S, T, 3] the D_s programs (bar) of the targets.
+      k: control periods per source step.
+      cfg: the oracle's settings.
+      progress: show the tracker's progress bar.
+
+    Returns:
+      [T * k, 3] or [S, T * k, 3] commands (bar), each held k periods.
+    """
+    if cfg.init == "mpc":
+        commands, _ = mpc.track(arm_c, target_poses, k, source_programs, progress=progress)
+        return commands
+    return held_lib.stretch(source_programs, k)
+
+
+def oracle_commands(
+    arm_c,
+    target_poses: np.ndarray,
+    init_commands: np.ndarray,
+    k: int,
+    cfg: OracleConfig,
+    held=False,
+    progress: bool = False,
+) -> tuple[np.ndarray, dict]:
+    """D_c commands that track the targets, optimised through the MJX rollout.
+
+    The commands are p_min + (p_max - p_min) * sigmoid(z); z starts at the init commands (clipped
+    0.01% inside the range) and Adam minimises mean(X_err_cm^2) + w^2 mean(phi_err^2), with
+    phi_err^2 ~ 2 (1 - cos). Several programs are optimised at once (one vmapped rollout; Adam
+    acts elementwise, so each program's iterates are those of its own optimisation), and each
+    program's best iterate is returned.
+
+    A held program keeps one command per source step, held k control periods, as every
+    translator's output is: its gradient is summed over each step's k periods, so from a held
+    start (the stretch program) Adam's iterates are exactly those of Adam on the [T, 3] held
+    commands. A free program has a command per control period.
+
+    Args:
+      arm_c: the D_c arm.
+      target_poses: [T, 6] or [S, T, 6] target poses (m, unit d3).
+      init_commands: [T * k, 3] or [S, T * k, 3] starting commands (bar), e.g. the stretch
+        program.
+      k: control periods per source step.
+      cfg: oracle settings.
+      held: bool, or [S] bools: which programs are held (each init program must then be
+        constant over each source step's k periods).
+      progress: show a progress bar over Adam steps (the first compiles: minutes).
+
+    Returns:
+      (commands [T * k, 3] or [S, T * k, 3] bar, info: "loss_history" [steps] or [steps, S]
+      (the loss of each iterate), "best_loss" (float or [S]), "wall_s", "step_wall_s" (per
+      Adam step; the first includes compiling)).
+    """
+    import jax
+    import jax.numpy as jnp
+    import optax
+
+    single = np.ndim(target_poses) == 2
+    targets = np.asarray(target_poses)[None] if single else np.asarray(target_poses)
+    inits = np.asarray(init_commands)[None] if single else np.asarray(init_commands)
+    if targets.shape[0] != inits.shape[0] or inits.shape[1] != targets.shape[1] * k:
+        raise ValueError(
+            f"targets {targets.shape} and init commands {inits.shape} do not match for k = {k}"
+        )
+    held = np.broadcast_to(np.asarray(held, bool), inits.shape[:1])
+    blocks = inits[held].reshape(-1, targets.shape[1], k, inits.shape[-1])
+    if not np.allclose(blocks, blocks[:, :, :1]):
+        raise ValueError(
+            "a held program's init commands must be constant over each step's k periods"
+        )
+    lo, hi = arm_c.valve.p_min_bar, arm_c.valve.p_max_bar
+    # Inits at a valve limit start just inside it (the sigmoid never reaches its ends); Adam's
+    # normalised steps move them out again however flat the sigmoid is there.
+    frac = np.clip((inits - lo) / (hi - lo), 1e-4, 1 - 1e-4)
+    z0 = jnp.asarray(np.log(frac / (1 - frac)), dtype=jnp.float32)
+    target = jnp.asarray(targets, dtype=jnp.float32)
+    rollout = jax.vmap(arm_c.rollout_fn(), in_axes=(None, 0))
+    mjx_model = arm_c.mjx_model
+    w = cfg.orientation_weight_cm_per_rad
+    held_mask = jnp.asarray(held)[:, None, None]
+
+    def project(grad):
+        """Held programs' gradients [S, T * k, 3] summed over each step's k periods."""
+        per_step = grad.reshape(grad.shape[0], -1, k, grad.shape[-1]).sum(2)
+        return jnp.where(held_mask, jnp.repeat(per_step, k, axis=1), grad)
+
+    def commands_of(z):
+        return lo + (hi - lo) * jax.nn.sigmoid(z)
+
+    def losses_of(z):
+        """[S] loss of each program."""
+        poses, ok = rollout(mjx_model, commands_of(z))
+        loss = metrics.tracking_loss(poses[:, k - 1 :: k], target, w)
+        return jnp.where(ok[:, -1], loss, jnp.inf)
+
+    # The step size is state, not a constant of the compiled step: one compilation (and the
+    # persistent cache) serves every learning rate.
+    opt = optax.inject_hyperparams(optax.adam)(learning_rate=cfg.learning_rate)
+
+    @jax.jit
+    def update(z, opt_state):
+        # The programs are independent: pulling back ones gives each its own gradient.
+        loss, pullback = jax.vjp(losses_of, z)
+        (grad,) = pullback(jnp.ones_like(loss))
+        grad = project(grad)
+        updates, opt_state = opt.update(grad, opt_state, z)
+        return optax.apply_updates(z, updates), opt_state, loss
+
+    t0 = time.perf_counter()
+    z, opt_state = z0, opt.init(z0)
+    best_z, best_loss, history, step_wall_s = z0, np.full(z0.shape[0], np.inf), [], []
+    steps = tqdm(
+        range(cfg.steps),
+        desc="oracle Adam steps (the 1st compiles)",
+        unit="step",
+        disable=not progress,
+    )
+    for _ in steps:
+        t_step = time.perf_counter()
+        new_z, opt_state, loss = update(z, opt_state)
+        loss = np.asarray(loss)  # the loss of z, before this update
+        step_wall_s.append(time.perf_counter() - t_step)
+        history.append(loss)
+        better = loss < best_loss
+        best_z = jnp.where(jnp.asarray(better)[:, None, None], z, best_z)
+        best_loss = np.where(better, loss, best_loss)
+        z = new_z
+        steps.set_postfix(best_loss_max=f"{best_loss.max():.4g}", refresh=False)
+    commands = np.asarray(commands_of(best_z), dtype=np.float64)
+    history = np.asarray(history).reshape(len(history), z0.shape[0])
+    info = {
+        "loss_history": history[:, 0].tolist() if single else history.tolist(),
+        "best_loss": float(best_loss[0]) if single else best_loss.tolist(),
+        "wall_s": time.perf_counter() - t0,
+        "step_wall_s": step_wall_s,
+    }
+    return (commands[0] if single else commands), info
