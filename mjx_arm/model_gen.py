@@ -65,10 +65,11 @@ class ArmParams:
     gravity_mps2: float = 9.80513
     """Gravity (m/s^2), the arm hangs along -z [code]."""
     n_segments: int = 10
-    """Rigid segments in the chain [choice: measured trade-off, see bench/ and README]."""
+    """Rigid segments in the chain [choice: the fidelity-vs-speed table of results/fidelity.md:
+    20 and 30 segments are no closer to the rod and several times slower]."""
     timestep_s: float = 0.004
-    """Physics timestep (s) [choice: bench/timestep.py measures speed and error against 0.5 ms;
-    stability at this step comes from `Domain.inertia_scale`]."""
+    """Physics timestep (s) [choice: stable with `Domain.inertia_scale` on full-range programs
+    in both media, with the rod's 63% times kept (results/fidelity.md)]."""
     medium_drag_ns_per_m2: float | None = None
     """Viscous drag of the source domain's medium on the arm, force per unit length per unit
     speed (N s/m^2) [fit; the paper code's damper at 800 1/s and 2e-4 s is a drag of 867.6 1/s
