@@ -1,9 +1,8 @@
-"""Evaluation of domain translation: shape programs, metrics, pipeline, plots and videos.
+"""Evaluation of domain translation: the five shapes scored in the simulator, plots and videos.
 
-MUJOCO_GL must be chosen before mujoco is first imported, so it is set here (EGL for off-screen
-rendering without a display) unless the environment already sets it.
+`mjx_arm` is imported first, so that its choices are made before anything here imports mujoco
+or jax: the XLA CPU flag and MUJOCO_GL (EGL for off-screen rendering when there is no display
+and libEGL can be found; otherwise left as the environment has it).
 """
 
-import os as _os
-
-_os.environ.setdefault("MUJOCO_GL", "egl")
+import mjx_arm  # noqa: F401

@@ -3,20 +3,21 @@
 Frames come from a MuJoCo C replay of each program (same valve law and per-substep pressures as
 `mjx_arm.Arm.rollout`), rendered with `mujoco.Renderer`; tip paths are line geoms added to the
 scene with `mujoco.mjv_connector`; panels are labelled with Pillow and written with mediapy.
+
+MUJOCO_GL is chosen in one place, `mjx_arm` at import (EGL without a display where libEGL exists;
+`eval` imports `mjx_arm` first); `_ensure_offscreen_gl` moves to EGL at render time where mujoco
+was imported without it and there is no display.
 """
 
 from __future__ import annotations
 
 import os
+from pathlib import Path
 
-os.environ.setdefault("MUJOCO_GL", "egl")
-
-from pathlib import Path  # noqa: E402
-
-import mediapy  # noqa: E402
-import mujoco  # noqa: E402
-import numpy as np  # noqa: E402
-from PIL import Image, ImageDraw  # noqa: E402
+import mediapy
+import mujoco
+import numpy as np
+from PIL import Image, ImageDraw
 
 GREEN = np.array([0.1, 0.8, 0.2, 1.0], dtype=np.float32)
 RED = np.array([0.9, 0.1, 0.1, 1.0], dtype=np.float32)

@@ -7,7 +7,10 @@ was asked for must load, reports state their lengths and arm, and long jobs show
 import dataclasses
 import hashlib
 import json
+import os
 import shutil
+import subprocess
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -326,3 +329,21 @@ def test_default_arm_is_the_solid_disc_one_and_model_path_is_used(small_xml, tmp
     # MJCF text wins over the file.
     arm_x, _ = pipeline.load_arms(pipeline.EvalConfig(xml=small_xml, model_path="ignored.xml"))
     assert arm_x.model_hash == hashlib.sha256(small_xml.encode()).hexdigest()[:16]
+
+
+def test_importing_eval_leaves_mujoco_gl_to_mjx_arm():
+    """MUJOCO_GL is chosen in one place, mjx_arm's guarded check: with no display and no libEGL
+    to be found, importing eval (and its renderer) first leaves the variable unset, as importing
+    mjx_arm does (MUJOCO_GL=egl would make mujoco fail to import there)."""
+    env = {k: v for k, v in os.environ.items() if k not in ("DISPLAY", "MUJOCO_GL")}
+    code = (
+        "import ctypes.util\n"
+        "ctypes.util.find_library = lambda name: None\n"
+        "import eval, eval.pipeline, eval.render, os\n"
+        "print('MUJOCO_GL=' + repr(os.environ.get('MUJOCO_GL')))\n"
+    )
+    out = subprocess.run(
+        [sys.executable, "-c", code], cwd=ROOT, env=env, capture_output=True, text=True, timeout=300
+    )
+    assert out.returncode == 0, out.stderr
+    assert "MUJOCO_GL=None" in out.stdout.splitlines()
