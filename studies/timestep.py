@@ -14,6 +14,7 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import json
+import sys
 import time
 from pathlib import Path
 
@@ -83,11 +84,14 @@ def main(argv: list[str] | None = None) -> None:
 
     args.out.mkdir(parents=True, exist_ok=True)
     machine = cpu_model()
-    (args.out / "timestep.json").write_text(json.dumps({"cpu": machine, "rows": rows}, indent=1))
+    command = " ".join(["python -m studies.timestep", *sys.argv[1:]])
+    (args.out / "timestep.json").write_text(
+        json.dumps({"cpu": machine, "command": command, "rows": rows}, indent=1)
+    )
     lines = [
         "# Segment count and timestep: error beside speed",
         "",
-        f"CPU: {machine}. Command: `python -m studies.timestep`. {args.trajectories} babbling"
+        f"CPU: {machine}. Command: `{command}`. {args.trajectories} babbling"
         f" programs of {args.seconds:g} s; errors are tip RMS distances over all 10 Hz poses.",
         "",
         "| domain | segments | timestep ms | inertia scale | RMS vs same at 0.5 ms, mm |"
