@@ -21,10 +21,11 @@ from typing import NamedTuple
 
 import numpy as np
 
-#: The valve's top pressure (bar); normalised pressure = pressure_bar / P_MAX_BAR.
-P_MAX_BAR = 3.5
-POSE_DIM = 6
-PRESSURE_DIM = 3
+from mjx_arm.constants import CONTROL_HZ, N_CHAMBERS, P_MAX_BAR, POSE_DIM
+
+#: Width of a pressure sample (one command per chamber); normalised pressure =
+#: pressure_bar / `P_MAX_BAR` (`mjx_arm.constants`).
+PRESSURE_DIM = N_CHAMBERS
 #: A sample: normalised pressures (3) then normalised pose (6).
 SAMPLE_DIM = PRESSURE_DIM + POSE_DIM
 
@@ -349,7 +350,6 @@ def read_domain(
         scale. `ModelHashMismatchError` (a DatasetError) when a file's model hash is not
         `model_hash`; its message names both hashes.
     """
-    from mjx_arm import constants
     from mjx_arm.dataset import DatasetError, load_dataset
 
     if slot not in (None, *SLOTS):
@@ -378,7 +378,7 @@ def read_domain(
         if len(set(values)) > 1:
             raise DatasetError(f"{slot or 'the'} files mix {what}: {_listing(names, values)}")
     for attr, want, what in (
-        ("control_hz", constants.CONTROL_HZ, "control rate (Hz)"),
+        ("control_hz", CONTROL_HZ, "control rate (Hz)"),
         ("pressure_scale_bar", P_MAX_BAR, "pressure scale (bar)"),
     ):
         values = [getattr(d, attr) for d in sets]

@@ -1,6 +1,6 @@
 """Flax Linen networks of the CCGAN-GP: forward model F, generator G and critic C.
 
-All inputs and outputs are in the normalised units of `ccgan.data`: pressures / 3.5 bar and poses
+All inputs and outputs are in the normalised units of `ccgan.data`: pressures / P_MAX_BAR and poses
 in [0, 1]. Sequences are batch-major, `[B, T, features]`.
 """
 
@@ -13,8 +13,9 @@ import flax.linen as nn
 import jax
 import jax.numpy as jnp
 
-POSE_DIM = 6
-PRESSURE_DIM = 3
+from mjx_arm.constants import N_CHAMBERS, POSE_DIM
+
+PRESSURE_DIM = N_CHAMBERS
 
 
 class ForwardModel(nn.Module):

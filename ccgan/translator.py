@@ -16,6 +16,7 @@ from ccgan.data import (
     denormalise_pose,
     denormalise_pressure,
     normalise_pose,
+    normalise_pressure,
     samples,
 )
 from ccgan.models import ForwardModel, Generator, forward_open_loop
@@ -153,7 +154,7 @@ class Translator:
         """
         if self.f_c_params is None:
             raise ValueError("this translator was saved without F_c")
-        p = jnp.asarray(np.asarray(pressures_c, np.float32) / 3.5)[None]
+        p = jnp.asarray(normalise_pressure(np.asarray(pressures_c, np.float32)))[None]
         x0 = jnp.asarray(normalise_pose(np.asarray(pose0, np.float32), self.bounds))[None]
         pred = forward_open_loop(self.forward_model, self.f_c_params, p, x0)
         return denormalise_pose(np.asarray(pred[0], np.float64), self.bounds)
