@@ -5,8 +5,14 @@ produced `[N, T, 6]` (tip position in m, then the unit d3 director), one pair pe
 domains are unpaired: trajectory i of D_s has nothing to do with trajectory i of D_c, so each domain
 is windowed and shuffled on its own.
 
-Normalisation follows the paper: pressures are divided by 3.5 bar; every pose axis is mapped to
-[0, 1] with per-axis bounds that span the workspace of both domains (`PoseBounds`).
+Normalisation, the one rule: pressures are divided by `P_MAX_BAR` (3.5 bar, the valve's top);
+poses go through `mjx_arm.dataset.normalise_pose` / `denormalise_pose`, which map each axis
+linearly from the bounds [low, high] to [0, 1]: (pose - low) / (high - low). The only choice left
+is the bounds (`PoseBounds`), and they span the workspace of both domains: bounds read from
+dataset files (`read_domain`) are the files' exact `mjx_arm.dataset.workspace_bounds`; bounds ccgan
+computes itself (`pose_bounds`, the default of `prepare`) are those workspace bounds widened by a
+5% margin of each axis' span on either side, so held-out poses a little outside the training
+data still land inside [0, 1]. Translators store the bounds they were trained with.
 
 On disk the arrays come from `mjx_arm.babble`'s dataset files; `read_domain` and
 `read_translation_files` load them through `mjx_arm.dataset.load_dataset` and refuse files that
@@ -21,7 +27,9 @@ from typing import NamedTuple
 
 import numpy as np
 
+from mjx_arm import dataset
 from mjx_arm.constants import CONTROL_HZ, N_CHAMBERS, P_MAX_BAR, POSE_DIM
+from mjx_arm.dataset import workspace_bounds
 
 #: Width of a pressure sample (one command per chamber); normalised pressure =
 #: pressure_bar / `P_MAX_BAR` (`mjx_arm.constants`).
@@ -58,7 +66,7 @@ def union_bounds(*bounds: PoseBounds) -> PoseBounds:
 
 
 def pose_bounds(*poses: np.ndarray, margin: float = 0.05, min_span: float = 1e-3) -> PoseBounds:
-    """Bounds spanning every pose given (both domains), widened by `margin` of the span each side.
+    """`mjx_arm.dataset.workspace_bounds` of every pose given (both domains), widened by `margin`.
 
     Args:
       *poses: arrays [..., 6] (m, unitless).
@@ -66,10 +74,9 @@ def pose_bounds(*poses: np.ndarray, margin: float = 0.05, min_span: float = 1e-3
       min_span: smallest span per axis (keeps a flat axis from dividing by ~0).
 
     Returns:
-      `PoseBounds` with [6] arrays.
+      `PoseBounds` with [6] float64 arrays.
     """
-    flat = np.concatenate([np.asarray(p, np.float64).reshape(-1, POSE_DIM) for p in poses])
-    low, high = flat.min(0), flat.max(0)
+    low, high = (np.asarray(b, np.float64) for b in workspace_bounds(*poses))
     span = np.maximum(high - low, min_span)
     mid = 0.5 * (low + high)
     half = 0.5 * span * (1.0 + 2.0 * margin)
@@ -77,7 +84,7 @@ def pose_bounds(*poses: np.ndarray, margin: float = 0.05, min_span: float = 1e-3
 
 
 def normalise_pressure(pressure_bar):
-    """[..., 3] bar -> [..., 3] in [0, 1] (pressure / 3.5 bar)."""
+    """[..., 3] bar -> [..., 3] in [0, 1] (pressure / P_MAX_BAR)."""
     return pressure_bar / P_MAX_BAR
 
 
@@ -86,16 +93,14 @@ def denormalise_pressure(pressure_norm):
     return pressure_norm * P_MAX_BAR
 
 
-def normalise_pose(pose, bounds: PoseBounds):
-    """[..., 6] (m, unitless) -> [..., 6] in [0, 1] inside the bounds."""
-    low, high = np.asarray(bounds.low), np.asarray(bounds.high)
-    return (pose - low) / (high - low)
+def normalise_pose(pose, bounds: PoseBounds) -> np.ndarray:
+    """[..., 6] (m, unitless) -> [..., 6] float32 in [0, 1] inside the bounds (module docstring)."""
+    return dataset.normalise_pose(pose, bounds.low, bounds.high)
 
 
-def denormalise_pose(pose_norm, bounds: PoseBounds):
-    """[..., 6] normalised -> [..., 6] (m, unitless)."""
-    low, high = np.asarray(bounds.low), np.asarray(bounds.high)
-    return pose_norm * (high - low) + low
+def denormalise_pose(pose_norm, bounds: PoseBounds) -> np.ndarray:
+    """[..., 6] normalised -> [..., 6] float32 (m, unitless); inverse of `normalise_pose`."""
+    return dataset.denormalise_pose(pose_norm, bounds.low, bounds.high)
 
 
 def check_domain_arrays(pressures_bar, poses, name: str = "data") -> tuple[np.ndarray, np.ndarray]:
