@@ -2,7 +2,7 @@
 
 Synthetic data of the paper's shapes (pressures [N, T, 3] bar, smooth poses [N, T, 6]) and a
 randomly initialised F_c (64/50): the cost of a train step does not depend on the values. Each
-timing forces every seed's k to one value of `stretch_choices`; the k selection (every
+timing forces every seed's k to one value of `hold_factors`; the k selection (every
 `stretch_every` epochs) is timed on its own and amortised into the per-epoch figure.
 
     python -m bench.train --out bench/results                 # reduced config (CPU)
@@ -265,7 +265,7 @@ def main(argv=None) -> None:
             ]
         name = "train_paper" + args.tag
     else:
-        ks = args.k or [min(config.stretch_choices), max(config.stretch_choices)]
+        ks = args.k or [min(config.hold_factors), max(config.hold_factors)]
         rows = []
         for impl in args.feedback_impls:
             conf = dataclasses.replace(config, feedback_impl=impl)

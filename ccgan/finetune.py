@@ -191,7 +191,7 @@ def x_err_cm_c(arm_c, commands_bar: np.ndarray, k: int, target: np.ndarray):
 
 
 def common_k(translators: list[Translator]) -> int:
-    """The time-stretching factor k every translator shares.
+    """The hold factor k every translator shares.
 
     Raises:
       ValueError: no translators, or they disagree on k.

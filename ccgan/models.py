@@ -125,7 +125,7 @@ def forward_stretched(
     unroll: int = 10,
     impl: str = "lean",
 ):
-    """F's open-loop response when each command is held k control periods (time stretching).
+    """F's open-loop response when each command is held k control periods (hold factor k).
 
     Every command is applied k times in a row and the pose after its k-th period is kept, so the
     result lines up step by step with the D_s trajectory the commands came from. `k` may be a
@@ -145,7 +145,7 @@ def forward_stretched(
       params: its variables (treated as constants).
       pressure: [B, T, 3] normalised commands.
       pose0: [B, 6] normalised pose before the first command.
-      k: hold factor, int (traced or static), 1 <= k <= k_max.
+      k: hold factor k, int (traced or static), 1 <= k <= k_max.
       k_max: static upper bound on k (sizes the stored activations).
       unroll: periods per loop iteration (fewer, longer iterations; numerics unchanged).
       impl: "lean" (matrix products) or "lean_reduce" (each small matrix product written as a

@@ -9,9 +9,9 @@ uninterrupted one because every epoch's randomness is `fold_in(key, epoch)`.
 One train step updates all four networks: first both critics (Wasserstein loss + gradient
 penalty), then both generators against the updated critics (adversarial + lambda_c cycle +
 identity + lambda_f feedback). The feedback term runs the frozen forward model F_c open-loop on
-G_c's commands, each held k control periods (adaptive time stretching), and compares every k-th
-pose with the D_s target. Every `stretch_every` epochs, k is re-chosen from `stretch_choices` by
-the tracking error on held-out D_s trajectories.
+G_c's commands, each held for k control periods (the hold factor k), and compares every k-th pose
+with the D_s target. Every `stretch_every` epochs, the hold factor k is re-chosen from
+`hold_factors` by the tracking error on held-out D_s trajectories.
 """
 
 from __future__ import annotations
@@ -57,6 +57,14 @@ FEEDBACK_IMPLS = ("auto", "lean", "lean_reduce")
 #: Rollouts that were options once and lost (docs/benchmarks.md, "Retired experiments"). A
 #: config naming one is refused; a stored run naming one resumes with this run's rollout.
 RETIRED_FEEDBACK_IMPLS = ("cell", "pallas")
+#: `TrainConfig` fields renamed since runs were first stored, {old name: new name}. A stored
+#: config (checkpoint metadata) reads through `stored_config`; the old flag stays a hidden alias.
+RENAMED_FIELDS = {"stretch_choices": "hold_factors"}
+
+
+def stored_config(config: dict) -> dict:
+    """A stored `TrainConfig` dict (checkpoint metadata), renamed fields under their new names."""
+    return {RENAMED_FIELDS.get(name, name): value for name, value in config.items()}
 
 
 def _first_sentence(text: str) -> str:
@@ -149,6 +157,19 @@ def add_config_flags(
         else:
             typ = {"int": int, "float": float}.get(str(f.type), type(f.default))
             group.add_argument(flag, type=typ, choices=(choices or {}).get(f.name), **kw)
+    for old, new in getattr(cls, "RENAMED_FIELDS", {}).items():
+        if new not in skip:
+            # The old flag, hidden: same destination, so it sets the renamed field.
+            action = next(
+                a for a in group._group_actions if a.dest == (prefix + new).replace("-", "_")
+            )
+            group.add_argument(
+                "--" + (prefix + old).replace("_", "-"),
+                dest=action.dest,
+                type=action.type,
+                nargs=action.nargs,
+                help=argparse.SUPPRESS,
+            )
 
 
 def config_from_args(
@@ -279,8 +300,9 @@ class TrainConfig:
     lambda_feedback: float = 5.0
     #: Gradient-penalty weight (paper code: 10).
     lambda_gp: float = 10.0
-    #: Hold factors k (control periods per translated command) to choose from (paper: 5..30).
-    stretch_choices: tuple[int, ...] = (5, 10, 15, 20, 25, 30)
+    #: Hold factors k (control periods each translated command is held) to choose from
+    #: (paper: 5..30). Formerly `stretch_choices` (`RENAMED_FIELDS`).
+    hold_factors: tuple[int, ...] = (5, 10, 15, 20, 25, 30)
     #: Epochs between choices of k (the paper's N; also chosen once before training).
     stretch_every: int = 10
     #: Control steps per held-out window when choosing k (0 = whole trajectories). Each window
@@ -307,6 +329,9 @@ class TrainConfig:
     #: Critic Conv1D widths (five layers).
     critic_features: tuple[int, ...] = (32, 64, 64, 128, 128)
 
+    #: Old field names (not a field: no annotation); `add_config_flags` keeps their flags hidden.
+    RENAMED_FIELDS = RENAMED_FIELDS
+
     def __post_init__(self):
         """Refuses settings that would fail late or train nothing (ConfigError names the field).
 
@@ -328,7 +353,7 @@ class TrainConfig:
                 "lambda_identity": 0,
                 "lambda_feedback": 0,
                 "lambda_gp": 0,
-                "stretch_choices": 1,
+                "hold_factors": 1,
                 "stretch_every": 1,
                 "val_window_length": 0,
                 "gen_unroll": 1,
@@ -358,10 +383,17 @@ class TrainConfig:
 
     @property
     def k_max(self) -> int:
-        return max(self.stretch_choices)
+        return max(self.hold_factors)
 
     def to_dict(self) -> dict:
         return json.loads(json.dumps(dataclasses.asdict(self)))
+
+    @classmethod
+    def from_dict(cls, config: dict) -> TrainConfig:
+        """The config of a `to_dict` dict, old field names (`RENAMED_FIELDS`) included."""
+        return cls(
+            **{k: tuple(v) if isinstance(v, list) else v for k, v in stored_config(config).items()}
+        )
 
 
 @flax.struct.dataclass
@@ -395,7 +427,7 @@ class Trainer(NamedTuple):
 
     init(key) -> TrainState;
     run_epochs(state, key, start_epoch, n_epochs: static int) -> (state, metrics {name: [n]});
-    validation_errors(state) -> [len(stretch_choices)] mean tip error (cm) per k.
+    validation_errors(state) -> [len(hold_factors)] mean tip error (cm) per k.
     """
 
     init: Any
@@ -517,13 +549,13 @@ def make_trainer(
     l_val = min(config.val_window_length or t_val, t_val)
     n_win = t_val // l_val
     low, high = jnp.asarray(data.bounds.low), jnp.asarray(data.bounds.high)
-    choices = jnp.asarray(config.stretch_choices, jnp.int32)
+    choices = jnp.asarray(config.hold_factors, jnp.int32)
 
     def to_windows(x):
         return x[:, : n_win * l_val].reshape(-1, l_val, x.shape[-1])
 
     def validation_errors(state: TrainState):
-        """Mean tip error (cm) on held-out D_s windows for each k in stretch_choices.
+        """Mean tip error (cm) on held-out D_s windows for each k in hold_factors.
 
         G_c translates whole held-out trajectories (as the translator does); F_c then runs the
         commands of every `val_window_length` window open loop from the window's recorded pose.
@@ -767,8 +799,14 @@ def _resume_expectation(ckpt_path: Path, meta: dict) -> dict:
     A run stored with a retired feedback rollout (`RETIRED_FEEDBACK_IMPLS`) resumes with this
     run's, with a warning: every rollout computes the same function up to float rounding, so
     only the stored name differs. The next checkpoint records this run's rollout.
+
+    A run stored before a field was renamed (`RENAMED_FIELDS`) resumes too: its fields are
+    compared under their old names, and the next checkpoint records the new ones.
     """
     stored = checkpoint.read(ckpt_path)[0].get("config")
+    if isinstance(stored, dict):
+        old_names = {new: old for old, new in RENAMED_FIELDS.items() if old in stored}
+        meta = meta | {"config": {old_names.get(k, k): v for k, v in meta["config"].items()}}
     impl = stored.get("feedback_impl") if isinstance(stored, dict) else None
     if impl not in RETIRED_FEEDBACK_IMPLS:
         return meta

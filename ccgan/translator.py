@@ -118,7 +118,7 @@ def save_translator(
 
 @dataclasses.dataclass
 class Translator:
-    """G_c with its time-stretching factor k and the normalisation it was trained with."""
+    """G_c with its hold factor k and the normalisation it was trained with."""
 
     g_c_params: dict
     k: int

@@ -121,14 +121,14 @@ def validation_error_cm(run, config: TrainConfig, seed: int = 0) -> tuple[float,
     """Trains one seed with `run` (from `make_validation_run`) at config's CONTINUOUS values.
 
     Returns:
-      (min over stretch_choices of the mean held-out tip error in cm, the k reaching it,
+      (min over hold_factors of the mean held-out tip error in cm, the k reaching it,
        {metric: value at the last epoch}).
     """
     hparams = {n: jnp.float32(getattr(config, n)) for n in CONTINUOUS}
     metrics, errs = jax.device_get(run(jax.random.PRNGKey(seed), hparams))
     best = int(np.argmin(errs))
     last = {name: float(v[-1]) for name, v in metrics.items() if name != "val_error_cm"}
-    return float(errs[best]), int(config.stretch_choices[best]), last
+    return float(errs[best]), int(config.hold_factors[best]), last
 
 
 class ForwardCache:

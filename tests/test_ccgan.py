@@ -249,7 +249,7 @@ TINY = train_lib.TrainConfig(
     batch_size=4,
     window_length=5,
     n_val=1,
-    stretch_choices=(1, 2),
+    hold_factors=(1, 2),
     stretch_every=2,
     checkpoint_every=2,
     gen_hidden=8,
@@ -316,13 +316,13 @@ def test_end_to_end_and_resume_equals_uninterrupted(tiny_setup, tmp_path):
         for m in train_lib.METRICS:
             if m != "val_error_cm":
                 assert np.isfinite(float(row[m])), m
-        assert int(float(row["k"])) in TINY.stretch_choices
+        assert int(float(row["k"])) in TINY.hold_factors
     assert np.isfinite([float(r["val_error_cm"]) for r in rows if int(r["epoch"]) % 2 == 0]).all()
     tr = ccgan.load_translator(tmp_path / "full" / "translator.ckpt")
     ps = np.full((7, 3), 1.0)
     xs = np.tile(data_lib.denormalise_pose(data.source.val[0, 0, 3:], data.bounds), (7, 1))
     pc, k = tr.translate(ps, xs)
-    assert k in TINY.stretch_choices and pc.shape == (7 * k, 3)
+    assert k in TINY.hold_factors and pc.shape == (7 * k, 3)
     assert np.isfinite(pc).all() and pc.min() >= 0.0 and pc.max() <= 3.5
     assert tr.predict_poses(pc, xs[0]).shape == (7 * k, 6)
 
@@ -398,7 +398,7 @@ assert len(jax.devices()) == 2
 data, fconf, fparams = pickle.loads(open({str(tmp_path / "setup.pkl")!r}, "rb").read())
 config = train_lib.TrainConfig(**{config.to_dict()!r})
 config = dataclasses.replace(config, **{{f: tuple(getattr(config, f)) for f in
-    ("stretch_choices", "critic_features")}})
+    ("hold_factors", "critic_features")}})
 train = train_lib.make_train(config, data, fparams, fconf.model)
 _, metrics = jax.jit(train)(jax.random.PRNGKey(0))
 np.savez({str(tmp_path / "two.npz")!r}, **jax.device_get(metrics))

@@ -149,7 +149,7 @@ def test_train_cli_refuses_mixed_or_wrong_arm_data(tmp_path, files, small_arm, c
         (["--lr-critic", "0"], "--lr-critic"),
         (["--batch-size", "0"], "--batch-size"),
         (["--window-length", "1"], "--window-length"),
-        (["--stretch-choices", "0", "5"], "--stretch-choices"),
+        (["--hold-factors", "0", "5"], "--hold-factors"),
         (["--beta2", "1"], "--beta2"),
         (["--forward-epochs", "0"], "--forward-epochs"),
         (["--forward-lr", "nan"], "--forward-lr"),
@@ -162,6 +162,38 @@ def test_train_cli_refuses_bad_options_before_any_work(tmp_path, files, flags, n
     err = usage_error(train_lib.main, [*argv, *TINY_TRAIN, *flags], capsys)
     assert named in err
     assert not workdir.exists()  # nothing written: no untrained translator
+
+
+def test_old_stretch_choices_name_still_reads():
+    """The hold factors were `stretch_choices` once: old flags and stored configs still work."""
+    parser = train_lib.build_parser()
+    argv = ["--source", "s.npz", "--constrained", "c.npz", "--workdir", "w"]
+    args = parser.parse_args([*argv, "--stretch-choices", "3", "4"])
+    assert train_lib.config_from_args(parser, args, train_lib.TrainConfig).hold_factors == (3, 4)
+    assert "stretch-choices" not in parser.format_help()
+    stored = train_lib.TrainConfig(hold_factors=(2, 7)).to_dict()
+    stored["stretch_choices"] = stored.pop("hold_factors")
+    assert train_lib.TrainConfig.from_dict(stored).hold_factors == (2, 7)
+
+
+def test_run_stored_with_stretch_choices_resumes_under_hold_factors(tmp_path):
+    config = train_lib.TrainConfig(hold_factors=(2, 7))
+    meta = {"config": config.to_dict(), "data": "d", "seeds": [0]}
+    old = meta | {"config": train_lib.stored_config(meta["config"])}
+    old["config"]["stretch_choices"] = old["config"].pop("hold_factors")
+    path = checkpoint.save(tmp_path / "state.ckpt", {"x": np.zeros(2)}, old)
+    with pytest.raises(checkpoint.CheckpointError):
+        checkpoint.load(path, expect=meta)
+    checkpoint.load(path, expect=train_lib._resume_expectation(path, meta))
+
+
+def test_committed_translator_config_reads_with_the_renamed_field():
+    path = constants.ROOT / "results" / "ccgan" / "translator_seed0.ckpt"
+    stored = checkpoint.read(path)[0]["config"]
+    assert "stretch_choices" in stored
+    config = train_lib.TrainConfig.from_dict(stored)
+    assert config.hold_factors == tuple(stored["stretch_choices"])
+    assert load_translator(path).k in config.hold_factors
 
 
 def test_train_cli_refuses_a_file_as_workdir(tmp_path, files, capsys):
@@ -179,7 +211,7 @@ def test_train_cli_refuses_a_file_as_workdir(tmp_path, files, capsys):
         (train_lib.TrainConfig, {"lr_generator": -1.0}, "lr_generator"),
         (train_lib.TrainConfig, {"window_length": 1}, "window_length"),
         (train_lib.TrainConfig, {"batch_size": 0}, "batch_size"),
-        (train_lib.TrainConfig, {"stretch_choices": ()}, "stretch_choices"),
+        (train_lib.TrainConfig, {"hold_factors": ()}, "hold_factors"),
         (train_lib.TrainConfig, {"lambda_cycle": float("inf")}, "lambda_cycle"),
         (train_lib.TrainConfig, {"feedback_impl": "fast"}, "feedback_impl"),
         (tune.SearchSpace, {"window_lengths": (1, 5)}, "window_lengths"),

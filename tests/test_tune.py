@@ -13,7 +13,7 @@ from ccgan import tune
 from mjx_arm.dataset import Dataset, save_dataset
 
 TINY_FLAGS = [
-    "--epochs", "2", "--batch-size", "4", "--n-val", "1", "--stretch-choices", "1", "2",
+    "--epochs", "2", "--batch-size", "4", "--n-val", "1", "--hold-factors", "1", "2",
     "--stretch-every", "2", "--gen-hidden", "8", "--gen-fc", "16",
     "--critic-features", "8", "8", "8", "8", "8", "--space-window-lengths", "5",
     "--forward-epochs", "3", "--forward-batch-size", "6", "--forward-hidden", "16",
