@@ -38,7 +38,7 @@ LABELS = {
 def save(fig, path: Path, mark: str | None = None) -> None:
     """Lays out, marks and writes a figure, then closes it.
 
-    A run that is not the main job's (`eval.pipeline.run_mark`) carries `mark` in red across the
+    A run that is not the main job's (`eval.report.run_mark`) carries `mark` in red across the
     figure and in the PNG's "Comment" text, so none of its figures can pass for a committed one.
     """
     fig.tight_layout()

@@ -159,7 +159,7 @@ def write_video(
     """Three-panel MP4 for one shape: D_s | D_c translated | D_c untranslated (`video_plan`).
 
     D_c panels are sampled at the end of each source step's k periods, so all panels share the
-    source time axis. `mark` (a quick run's, `eval.pipeline.run_mark`) is added to every
+    source time axis. `mark` (a quick run's, `eval.report.run_mark`) is added to every
     panel's label; `on_frame` is called after each rendered panel frame. Returns the path.
     """
     frames_at, methods = video_plan(traj, cfg)

@@ -1,7 +1,8 @@
 """The evaluation's command line and its five test shapes.
 
 `python -m eval.shapes` scores every method on the paper's five shapes in the D_c simulator (this
-module's `main`; `python -m eval.shapes --help` lists the options, `eval.pipeline` does the work).
+module's `main`; `python -m eval.shapes --help` lists the options): the flags become an
+`eval.pipeline.EvalConfig`, checked before any work, and `eval.pipeline.evaluate` does the work.
 
 The pressure programs themselves are pure functions of time and live below every layer that
 draws them, in `mjx_arm.programs` (the circle, rectangle, damped circle, ellipse and kite, each
@@ -12,6 +13,14 @@ users of `eval.shapes`.
 
 from __future__ import annotations
 
+import argparse
+import sys
+import time
+
+from ccgan.train import HelpFormatter
+from eval.methods import DEFAULT_METHODS, METHODS, PATH_FLAGS, TranslatorError
+from eval.pipeline import RESULTS_DIR, RUNS_DIR, EvalConfig, default_methods, evaluate, quick
+from mjx_arm import programs
 from mjx_arm.programs import (
     AMPLITUDE_BAR,
     CHAMBER_ANGLES_RAD,
@@ -34,11 +43,14 @@ from mjx_arm.programs import (
     times_s,
     validation_program,
 )
+from tracking.config import ConfigError
+from tracking.oracle import OracleConfig
 
 __all__ = [
     "AMPLITUDE_BAR",
     "CHAMBER_ANGLES_RAD",
     "CONTROL_HZ",
+    "FLAGS",
     "PERIODIC_SHAPES",
     "PERIOD_S",
     "P_HIGH_BAR",
@@ -46,11 +58,13 @@ __all__ = [
     "P_MID_BAR",
     "SHAPES",
     "SHAPE_LIKE_KINDS",
+    "build_parser",
     "circle",
     "damped_circle",
     "ellipse",
     "kite",
     "main",
+    "parse_args",
     "pressures_from_bend",
     "rectangle",
     "shape_like_program",
@@ -59,12 +73,245 @@ __all__ = [
     "validation_program",
 ]
 
+#: EvalConfig fields (OracleConfig's as "oracle.<field>") -> the flag that sets them, so a
+#: ConfigError becomes a usage error that names the flag.
+FLAGS = {
+    "shapes": "--shapes",
+    "methods": "--methods",
+    "seeds": "--seeds",
+    "out_dir": "--out",
+    "backend": "--backend",
+    "duration_s": "--duration",
+    "stretch_candidates": "--stretch-choices",
+    "model_path": "--model",
+    "target_domain": "--target-domain",
+    **{f"{method}_path": flag for method, flag in PATH_FLAGS.items()},
+    "oracle.steps": "--oracle-steps",
+    "oracle.learning_rate": "--oracle-lr",
+    "oracle.init": "--oracle-init",
+    "oracle.horizon_s": "--oracle-horizon",
+}
 
-def main(argv: list[str] | None = None) -> None:
-    """CLI: evaluate the methods on the shapes; see `eval.pipeline.parse_args`."""
-    from eval import pipeline
 
-    pipeline.main(argv)
+def build_parser() -> argparse.ArgumentParser:
+    """The `python -m eval.shapes` parser: one line of help per option, with its default."""
+    p = argparse.ArgumentParser(
+        prog="python -m eval.shapes",
+        formatter_class=HelpFormatter,
+        description=(
+            "Trajectory-tracking evaluation in D_c: the five shapes, each method's D_c commands"
+            " scored in the simulator. The main job (`--render` and every other default) REWRITES"
+            " the committed results in results/ (shapes.md, shapes.json, plots, videos); --quick"
+            f" and any other settings write a new folder {RUNS_DIR}/<quick|custom>-<time>/ unless"
+            " --out names one. Every option is checked before any work."
+        ),
+    )
+    _add_run_options(p)
+    _add_arm_options(p)
+    _add_oracle_options(p)
+    return p
+
+
+def _add_run_options(p: argparse.ArgumentParser) -> None:
+    """What runs and where it goes: shapes, methods, seeds, output, simulator, lengths."""
+    p.add_argument(
+        "--shapes",
+        nargs="+",
+        default=list(programs.SHAPES),
+        choices=list(programs.SHAPES),
+        metavar="SHAPE",
+        help=f"shapes to track, of {', '.join(programs.SHAPES)}",
+    )
+    p.add_argument(
+        "--methods",
+        nargs="+",
+        default=None,
+        choices=list(METHODS),
+        metavar="METHOD",
+        help=f"methods to score, of {', '.join(METHODS)} (default: "
+        + " ".join(DEFAULT_METHODS)
+        + ", less the oracle on"
+        " a CPU)",
+    )
+    p.add_argument(
+        "--seeds",
+        metavar="SEED",
+        nargs="+",
+        type=int,
+        default=[0, 1, 2],
+        help="seeds (>= 0): noise draws, and trained models per seed",
+    )
+    p.add_argument(
+        "--out",
+        metavar="DIR",
+        default=None,
+        help=f"output folder (default: {RESULTS_DIR}/ for the main job, else a new"
+        f" {RUNS_DIR}/<quick|custom>-<time>/)",
+    )
+    p.add_argument(
+        "--backend",
+        "--device",
+        dest="backend",
+        choices=["c", "mjx"],
+        default="c",
+        help="simulator of every rollout but the oracle's: MuJoCo C or MJX",
+    )
+    p.add_argument(
+        "--duration",
+        metavar="SECONDS",
+        type=float,
+        default=EvalConfig.duration_s,
+        help="length of each shape program (s)",
+    )
+    p.add_argument(
+        "--stretch-choices",
+        metavar="K",
+        nargs="+",
+        type=int,
+        default=list(EvalConfig.stretch_candidates),
+        help="stretch factors k >= 1 (control periods per source step) tried",
+    )
+    p.add_argument("--render", action="store_true", help="write MP4 videos")
+    p.add_argument(
+        "--quick",
+        action="store_true",
+        help="smoke run: programs of at most 10 s, first seed, 10 s validation, 2 repetitions;"
+        f" into a new {RUNS_DIR}/quick-<time>/ unless --out; marked on every plot and in shapes.md",
+    )
+    p.add_argument("--no-robustness", action="store_true", help="skip noise/periodicity tests")
+
+
+def _add_arm_options(p: argparse.ArgumentParser) -> None:
+    """The arm, the target domain and the translator checkpoints."""
+    p.add_argument(
+        "--model",
+        metavar="MJCF",
+        default=EvalConfig.model_path,
+        help="MJCF file of the arm; by default the old solid-disc arm, on which the committed"
+        " translators were trained",
+    )
+    p.add_argument(
+        "--target-domain",
+        default=EvalConfig.target_domain,
+        choices=["constrained", "aged"],
+        help="D_c: the paper's viscous medium, or the aged arm (stiffness x0.7, same medium)",
+    )
+    p.add_argument(
+        "--ccgan-path",
+        metavar="CKPT",
+        default=None,
+        help="CCGAN-GP translator checkpoint (default:"
+        " $CCGAN_TRANSLATOR, else results/ccgan/translator.ckpt, skipped if absent)",
+    )
+    p.add_argument(
+        "--wcgan-path",
+        metavar="CKPT",
+        default=None,
+        help="WCGAN-GP translator checkpoint (default:"
+        " results/wcgan/translator.ckpt, skipped if absent)",
+    )
+    p.add_argument(
+        "--ccgan-sim-path",
+        metavar="CKPT",
+        default=None,
+        help="fine-tuned CCGAN-GP checkpoint"
+        " (default: results/ccgan_sim8/translator.ckpt, skipped if absent)",
+    )
+
+
+def _add_oracle_options(p: argparse.ArgumentParser) -> None:
+    """The oracle's settings (`tracking.oracle.OracleConfig`)."""
+    p.add_argument(
+        "--oracle-per-period",
+        action="store_true",
+        help="oracle with a free command per control period (not held k periods)",
+    )
+    p.add_argument(
+        "--oracle-steps",
+        metavar="N",
+        type=int,
+        default=OracleConfig.steps,
+        help="the oracle's Adam steps (>= 1)",
+    )
+    p.add_argument(
+        "--oracle-lr",
+        metavar="LR",
+        type=float,
+        default=OracleConfig.learning_rate,
+        help="the oracle's Adam step size on the sigmoid logits",
+    )
+    p.add_argument(
+        "--oracle-init",
+        choices=["mpc", "stretch"],
+        default=OracleConfig.init,
+        help="the oracle's start: the mpc commands or the stretch program",
+    )
+    p.add_argument(
+        "--oracle-horizon",
+        metavar="SECONDS",
+        type=float,
+        default=OracleConfig.horizon_s,
+        help="seconds optimised by the oracle; <= 0 for the whole program",
+    )
+
+
+def parse_args(argv: list[str] | None = None) -> EvalConfig:
+    """EvalConfig from command-line flags (see --help); a setting EvalConfig refuses exits with
+    a usage error naming its flag, before any work."""
+    p = build_parser()
+    a = p.parse_args(argv)
+    methods = default_methods() if a.methods is None else a.methods
+    horizon = None if a.oracle_horizon is not None and a.oracle_horizon <= 0 else a.oracle_horizon
+    try:
+        cfg = EvalConfig(
+            shapes=tuple(a.shapes),
+            methods=tuple(methods),
+            seeds=tuple(a.seeds),
+            duration_s=a.duration,
+            backend=a.backend,
+            stretch_candidates=tuple(a.stretch_choices),
+            render=a.render,
+            robustness=not a.no_robustness,
+            out_dir=a.out,
+            model_path=a.model,
+            ccgan_path=a.ccgan_path,
+            wcgan_path=a.wcgan_path,
+            ccgan_sim_path=a.ccgan_sim_path,
+            target_domain=a.target_domain,
+            oracle=OracleConfig(
+                steps=a.oracle_steps,
+                learning_rate=a.oracle_lr,
+                horizon_s=horizon,
+                held=not a.oracle_per_period,
+                init=a.oracle_init,
+            ),
+        )
+        cfg = quick(cfg) if a.quick else cfg
+    except ConfigError as err:
+        p.error(f"{FLAGS.get(err.field, err.field)} {err.problem}")
+    if a.methods is None and "oracle" not in methods:
+        print(
+            "NOTE: oracle left out by default on CPU (MJX gradients: ~8 min more on 2 cores"
+            " with --oracle-steps 10); add it with --methods ... oracle."
+        )
+    return cfg
+
+
+def main(argv: list[str] | None = None) -> dict:
+    """Thin entry point: parse flags, evaluate, print the wall time. A translator checkpoint
+    that does not load ends the run with an error (exit status 1) before any work."""
+    from mjx_arm.machine import enable_compilation_cache
+
+    cfg = parse_args(argv)
+    enable_compilation_cache()
+    command = "python -m eval.shapes " + " ".join(sys.argv[1:] if argv is None else argv)
+    t0 = time.perf_counter()
+    try:
+        results = evaluate(cfg, command=command.strip())
+    except TranslatorError as err:
+        raise SystemExit(f"python -m eval.shapes: error: {err}") from None
+    print(f"total wall time: {time.perf_counter() - t0:.1f} s")
+    return results
 
 
 if __name__ == "__main__":

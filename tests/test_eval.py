@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 import mjx_arm  # (before jax)
-from eval import pipeline, render
+from eval import methods, pipeline, render, report, simulate
 from mjx_arm import programs
 from tracking import held, metrics, mpc
 from tracking.metrics import tracking_loss
@@ -24,11 +24,11 @@ def small_xml():
 
 def test_noise_is_clipped_and_zero_mean():
     p = np.full((4000, 3), 1.75)
-    noisy = pipeline.add_noise(p, 0.1, seed=0)
+    noisy = simulate.add_noise(p, 0.1, seed=0)
     assert noisy.min() >= 0 and noisy.max() <= 3.5
     assert abs(noisy.mean() / 3.5 - 0.5) < 0.01
     assert abs((noisy / 3.5).std() - 0.1) < 0.01
-    np.testing.assert_array_equal(noisy, pipeline.add_noise(p, 0.1, seed=0))
+    np.testing.assert_array_equal(noisy, simulate.add_noise(p, 0.1, seed=0))
 
 
 def test_replay_matches_rollout(small_xml):
@@ -122,14 +122,14 @@ def test_translator_per_trained_seed(tmp_path):
     for name in ("translator.ckpt", "translator_seed0.ckpt", "translator_seed1.ckpt"):
         shutil.copy(shipped, tmp_path / name)
     path = str(tmp_path / "translator.ckpt")
-    two = pipeline.load_translator("ccgan", pipeline.EvalConfig(seeds=(0, 1), ccgan_path=path))[0]
+    two = methods.load_translator("ccgan", pipeline.EvalConfig(seeds=(0, 1), ccgan_path=path))[0]
     assert sorted(two.trained_seeds) == [0, 1] and two.takes_seed
     p_s = np.full((4, 3), 1.0)
     rest = np.tile([0.0, 0.0, -0.2, 0.0, 0.0, 1.0], (4, 1))  # tip (m), unit d3
     commands, k = two.translate(p_s, rest, seed=1)
     assert commands.shape == (4 * k, 3)
     # A seed without its own model: the single checkpoint serves every seed.
-    three = pipeline.load_translator("ccgan", pipeline.EvalConfig(seeds=(0, 1, 2), ccgan_path=path))
+    three = methods.load_translator("ccgan", pipeline.EvalConfig(seeds=(0, 1, 2), ccgan_path=path))
     assert three[0].trained_seeds == {}
 
 
@@ -141,10 +141,10 @@ def test_default_translator_finds_its_trained_seeds(tmp_path, monkeypatch):
     for name in ("translator.ckpt", "translator_seed0.ckpt", "translator_seed1.ckpt"):
         shutil.copy(shipped, tmp_path / name)
     monkeypatch.setenv("CCGAN_TRANSLATOR", str(tmp_path / "translator.ckpt"))
-    tr, why = pipeline.load_translator("ccgan", pipeline.EvalConfig(seeds=(0, 1)))
+    tr, why = methods.load_translator("ccgan", pipeline.EvalConfig(seeds=(0, 1)))
     assert sorted(tr.trained_seeds) == [0, 1], why
     monkeypatch.delenv("CCGAN_TRANSLATOR")
-    tr, _ = pipeline.load_translator("ccgan", pipeline.EvalConfig(seeds=(0, 1, 2)))
+    tr, _ = methods.load_translator("ccgan", pipeline.EvalConfig(seeds=(0, 1, 2)))
     committed = shipped.parent / "translator_seed2.ckpt"
     assert bool(tr.trained_seeds) == committed.exists()
 
@@ -208,7 +208,7 @@ def test_findings_count_shapes_and_ratios():
             "kite": {"ccgan": {"0.1": row(0.5), "0.5": row(0.8)}},
         },
     }
-    lines = pipeline.findings(results)
+    lines = report.findings(results)
     assert (
         "- CCGAN-GP against untranslated: lower mean X_err on 2 of 2 shapes (circle, kite);"
         " X_err ratio CCGAN-GP / untranslated 0.10-0.80." in lines
@@ -223,4 +223,4 @@ def test_findings_count_shapes_and_ratios():
         "- Largest noise (std 0.5), CCGAN-GP: mean X_err 0.100-0.400 cm clean -> 0.300-0.800 cm"
         " (2.00-3.00x)." in lines
     )
-    assert pipeline.findings({"methods_run": ["none"], "table": {"circle": {}}}) == []
+    assert report.findings({"methods_run": ["none"], "table": {"circle": {}}}) == []

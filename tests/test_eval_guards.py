@@ -18,8 +18,9 @@ import pytest
 from PIL import Image
 
 import mjx_arm  # noqa: F401  (before jax)
-from eval import pipeline, plots
+from eval import methods, pipeline, plots, report, shapes
 from mjx_arm import constants
+from tracking.config import ConfigError
 from tracking.oracle import OracleConfig
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -40,7 +41,7 @@ def in_tmp(tmp_path, monkeypatch):
 
 
 def test_quick_run_defaults_to_a_new_run_folder_never_results(in_tmp):
-    cfg = pipeline.parse_args(["--quick", "--render"])
+    cfg = shapes.parse_args(["--quick", "--render"])
     assert cfg.quick and cfg.duration_s == 10.0 and cfg.seeds == (0,) and cfg.out_dir is None
     first, second = pipeline.output_dir(cfg), pipeline.output_dir(cfg)
     for out in (first, second):
@@ -48,13 +49,13 @@ def test_quick_run_defaults_to_a_new_run_folder_never_results(in_tmp):
         assert out.is_dir()
     assert first != second  # two quick runs never share (and overwrite) a folder
     # Other settings than the main job's: a run folder too.
-    custom = pipeline.output_dir(pipeline.parse_args(["--duration", "30"]))
+    custom = pipeline.output_dir(shapes.parse_args(["--duration", "30"]))
     assert custom.parent == Path(pipeline.RUNS_DIR) and custom.name.startswith("custom-")
     assert not Path("results").exists()
     # The main job (with or without videos) regenerates results/; --out is always obeyed.
-    assert pipeline.output_dir(pipeline.parse_args(["--render"])) == Path("results")
-    assert pipeline.output_dir(pipeline.parse_args([])) == Path("results")
-    assert pipeline.output_dir(pipeline.parse_args(["--quick", "--out", "results"])) == Path(
+    assert pipeline.output_dir(shapes.parse_args(["--render"])) == Path("results")
+    assert pipeline.output_dir(shapes.parse_args([])) == Path("results")
+    assert pipeline.output_dir(shapes.parse_args(["--quick", "--out", "results"])) == Path(
         "results"
     )
 
@@ -94,12 +95,12 @@ def test_quick_run_is_marked_and_states_its_arm_and_lengths(in_tmp, capsys):
 
 def test_committed_report_regenerates_and_its_lengths_come_from_the_config():
     results = json.loads((ROOT / "results" / "shapes.json").read_text())
-    assert pipeline.markdown_report(results) == (ROOT / "results" / "shapes.md").read_text()
+    assert report.markdown_report(results) == (ROOT / "results" / "shapes.md").read_text()
     results["config"]["validation_duration_s"] = 10.0
-    md = pipeline.markdown_report(results)
+    md = report.markdown_report(results)
     assert "on a 10 s validation program" in md and "20 s validation" not in md
     results["config"].update(quick=True, duration_s=10.0, seeds=[0])
-    assert "QUICK RUN: 10 s programs, seeds [0]" in pipeline.markdown_report(results)
+    assert "QUICK RUN: 10 s programs, seeds [0]" in report.markdown_report(results)
 
 
 def test_figures_of_a_quick_run_carry_the_mark(tmp_path):
@@ -142,7 +143,7 @@ def test_figures_of_a_quick_run_carry_the_mark(tmp_path):
 def test_bad_options_are_usage_errors_before_any_work(in_tmp, capsys, argv, flag, reason):
     Path("a_file").write_text("not a folder")
     with pytest.raises(SystemExit) as exc:
-        pipeline.parse_args(argv)
+        shapes.parse_args(argv)
     assert exc.value.code == 2
     err = capsys.readouterr().err
     assert "usage: python -m eval.shapes" in err and flag in err and reason in err, err
@@ -172,19 +173,19 @@ def test_bad_options_are_usage_errors_before_any_work(in_tmp, capsys, argv, flag
 )
 def test_eval_config_refuses_bad_settings(in_tmp, kwargs, field):
     Path("a_file").write_text("not a folder")
-    with pytest.raises(pipeline.ConfigError) as exc:
+    with pytest.raises(ConfigError) as exc:
         pipeline.EvalConfig(**kwargs)
     assert exc.value.field == field
 
 
 def test_oracle_config_refuses_bad_settings():
     for kwargs in ({"steps": 0}, {"learning_rate": 0.0}, {"horizon_s": 0.0}, {"init": "zeros"}):
-        with pytest.raises(pipeline.ConfigError):
+        with pytest.raises(ConfigError):
             OracleConfig(**kwargs)
 
 
 def test_help_names_the_program_and_shows_every_default():
-    parser = pipeline.build_parser()
+    parser = shapes.build_parser()
     assert parser.prog == "python -m eval.shapes"
     assert "REWRITES the committed results in results/" in parser.description
     formatter = parser._get_formatter()
@@ -212,19 +213,19 @@ def test_a_translator_that_was_asked_for_must_load(small_xml, tmp_path, monkeypa
         xml=small_xml,
         out_dir=str(tmp_path / "out"),
     )
-    with pytest.raises(pipeline.TranslatorError, match="does not load"):
+    with pytest.raises(methods.TranslatorError, match="does not load"):
         pipeline.evaluate(cfg, command="test", log=lambda *_: None)
     assert not (tmp_path / "out").exists()  # stopped before any work or file
     # $CCGAN_TRANSLATOR is a choice too: a missing file there is an error, not a skip.
     monkeypatch.setenv("CCGAN_TRANSLATOR", str(tmp_path / "nope.ckpt"))
-    with pytest.raises(pipeline.TranslatorError, match="no translator checkpoint"):
-        pipeline.load_translator("ccgan", pipeline.EvalConfig(methods=("ccgan",)))
+    with pytest.raises(methods.TranslatorError, match="no translator checkpoint"):
+        methods.load_translator("ccgan", pipeline.EvalConfig(methods=("ccgan",)))
     # From the command line: a non-zero exit naming the file.
     monkeypatch.delenv("CCGAN_TRANSLATOR")
     argv = ["--methods", "none", "ccgan", "--ccgan-path", str(bad), "--shapes", "circle"]
     argv += ["--duration", "0.5", "--no-robustness", "--out", str(tmp_path / "cli")]
     with pytest.raises(SystemExit) as exc:
-        pipeline.main(argv)
+        shapes.main(argv)
     assert exc.value.code not in (0, None) and "does not load" in str(exc.value.code)
     assert not (tmp_path / "cli").exists()
 
@@ -236,21 +237,21 @@ def test_missing_default_translators_are_skipped_with_a_note(tmp_path, monkeypat
     monkeypatch.delenv("CCGAN_TRANSLATOR", raising=False)
     missing = tmp_path / "missing" / "translator.ckpt"
     monkeypatch.setattr(ccgan.translator, "DEFAULT_PATH", missing)
-    monkeypatch.setattr(pipeline, "CCGAN_SIM_DEFAULT_PATH", missing)
-    monkeypatch.setattr(pipeline, "WCGAN_DEFAULT_PATH", missing)
+    monkeypatch.setattr(methods, "CCGAN_SIM_DEFAULT_PATH", missing)
+    monkeypatch.setattr(methods, "WCGAN_DEFAULT_PATH", missing)
     cfg = pipeline.EvalConfig()
     for method, flag in (
         ("ccgan", "--ccgan-path"),
         ("ccgan_sim", "--ccgan-sim-path"),
         ("wcgan", "--wcgan-path"),
     ):
-        tr, why = pipeline.load_translator(method, cfg)
+        tr, why = methods.load_translator(method, cfg)
         assert tr is None and str(missing) in why and flag in why, why
     # A default that is there but does not load is an error, not a skip.
     missing.parent.mkdir()
     missing.write_bytes(b"corrupt")
-    with pytest.raises(pipeline.TranslatorError, match="does not load"):
-        pipeline.load_translator("wcgan", cfg)
+    with pytest.raises(methods.TranslatorError, match="does not load"):
+        methods.load_translator("wcgan", cfg)
 
 
 def test_wcgan_default_path_never_calls_the_loader_with_kind(tmp_path, monkeypatch):
@@ -267,14 +268,14 @@ def test_wcgan_default_path_never_calls_the_loader_with_kind(tmp_path, monkeypat
 
     monkeypatch.setattr(ccgan, "load_translator", spy)
     default = tmp_path / "wcgan" / "translator.ckpt"
-    monkeypatch.setattr(pipeline, "WCGAN_DEFAULT_PATH", default)
+    monkeypatch.setattr(methods, "WCGAN_DEFAULT_PATH", default)
     cfg = pipeline.EvalConfig(seeds=(0, 1))
-    tr, why = pipeline.load_translator("wcgan", cfg)
+    tr, why = methods.load_translator("wcgan", cfg)
     assert tr is None and calls == [] and str(default) in why
     default.parent.mkdir()
     for name in ("translator.ckpt", "translator_seed0.ckpt", "translator_seed1.ckpt"):
         shutil.copy(SHIPPED, default.parent / name)
-    tr, why = pipeline.load_translator("wcgan", cfg)
+    tr, why = methods.load_translator("wcgan", cfg)
     assert sorted(tr.trained_seeds) == [0, 1], why
     assert all("kind" not in c for c in calls)
     rest = np.tile([0.0, 0.0, -0.2, 0.0, 0.0, 1.0], (4, 1))  # tip (m), unit d3
@@ -304,7 +305,7 @@ def test_translators_trained_on_another_arm_are_refused(small_xml, tmp_path, mon
         xml=small_xml,
         out_dir=str(tmp_path / "out"),
     )
-    with pytest.raises(pipeline.TranslatorError, match="0123456789abcdef"):
+    with pytest.raises(methods.TranslatorError, match="0123456789abcdef"):
         pipeline.evaluate(cfg, command="test", log=lambda *_: None)
     assert not (tmp_path / "out").exists()
     same = dataclasses.replace(cfg, ccgan_path=str(tmp_path / "same.ckpt"))

@@ -1,0 +1,254 @@
+"""The evaluation's methods: their names, the translator checkpoints and how each method's D_c
+commands are made.
+
+Methods:
+  none     D_s pressures straight into D_c (k = 1).
+  stretch  D_s pressures, each held k periods; k minimises the tracking error on a separate
+           validation program (`mjx_arm.programs.validation_program`), searched over
+           EvalConfig.stretch_candidates = {1, 5, 10, ..., 30}: the GAN's set {5, ..., 30} plus 1.
+  ccgan    the trained CCGAN-GP translator `ccgan.load_translator(path)`. Every translator
+           method is skipped with a note when its default checkpoint is absent; one that was
+           asked for (--ccgan-path etc.) must load, or the run stops before any work.
+  ccgan_sim  the CCGAN-GP translator fine-tuned in the simulator: through the MJX rollout
+           (`ccgan.finetune`: results/ccgan_sim, ccgan_sim2, ccgan_sim3 on babbling programs,
+           ccgan_sim4, ccgan_sim5 on shape-like ones), then by imitation of `tracking.mpc`
+           (`ccgan.distill`: ccgan_sim6, ccgan_sim7, ccgan_sim8): the last stage's
+           results/ccgan_sim8/translator.ckpt or --ccgan-sim-path; not in the default methods.
+  wcgan    the WCGAN-GP baseline translator: a translator checkpoint given by --wcgan-path or
+           found at results/wcgan/translator.ckpt.
+  mpc      receding-horizon tracking in the D_c simulator itself (`tracking.mpc.track`, MuJoCo C,
+           k = the stretch k): at every source step the next command is planned by Gauss-Newton
+           on the simulated tracking error and applied. Not a translator (it needs the D_c
+           simulator at translation time); a model-based reference. Not in the default methods.
+  oracle   D_c commands optimised directly through the differentiable MJX rollout with
+           optax Adam (`tracking.oracle`; k = the stretch k), commands kept in the valve range by
+           a sigmoid, starting from the mpc commands (OracleConfig.init; "stretch" starts from
+           the stretch program); a lower reference for the other methods. Like every
+           translator's output, one command per source step held k periods (OracleConfig.held;
+           --oracle-per-period frees every control period). All shapes are
+           optimised together (one vmapped rollout). Gradients through thousands of MJX steps
+           are slow, so the oracle optimises (and every method's ratio to it is computed over)
+           the first `OracleConfig.horizon_s` seconds only, and the CLI leaves it out on CPU
+           unless asked: five 2 s programs at k = 10 (5,000 physics steps each), 10 Adam steps,
+           took 500 s on a 2-core CPU, compile included (results/full at commit 7e006b8); on an H200
+           the first step took 98 s and each further one 11.6 s (bench/results/h200/oracle.md).
+
+A translator checkpoint is read by `ccgan.translator` (one class for every learned translator);
+`Translator` here only adds what the evaluation needs on top of any object with a `translate`:
+the seed (a sampling translator draws with it, one trained model per seed is picked by it), a
+check of the commands' shape, and the arms its files record.
+"""
+
+from __future__ import annotations
+
+import inspect
+import os
+from pathlib import Path
+
+import numpy as np
+
+from tracking.held import stretch
+
+METHODS = ("none", "stretch", "ccgan", "ccgan_sim", "wcgan", "mpc", "oracle")
+#: What runs without --methods (the oracle is left out on CPU).
+DEFAULT_METHODS = ("none", "stretch", "ccgan", "wcgan", "oracle")
+TRANSLATOR_METHODS = ("ccgan", "ccgan_sim", "wcgan")
+#: Where the simulator-fine-tuned CCGAN-GP (`ccgan.finetune`) is looked for when no path is given.
+CCGAN_SIM_DEFAULT_PATH = (
+    Path(__file__).resolve().parent.parent / "results" / "ccgan_sim8" / "translator.ckpt"
+)
+#: Where the WCGAN-GP baseline's translator checkpoint is looked for when no path is given.
+WCGAN_DEFAULT_PATH = (
+    Path(__file__).resolve().parent.parent / "results" / "wcgan" / "translator.ckpt"
+)
+#: The flag that gives each translator method's checkpoint, named in notes and errors.
+PATH_FLAGS = {"ccgan": "--ccgan-path", "wcgan": "--wcgan-path", "ccgan_sim": "--ccgan-sim-path"}
+
+
+class TranslatorError(ValueError):
+    """A translator checkpoint that was asked for (a path, or $CCGAN_TRANSLATOR) is missing or
+    does not load; the run stops before any work instead of skipping the method."""
+
+
+def translator_source(method: str, cfg) -> tuple[Path, bool]:
+    """(checkpoint file, whether it was asked for) of a translator method.
+
+    `cfg` is an `eval.pipeline.EvalConfig` (not imported: the pipeline imports this module).
+
+    Asked for: a path in cfg, or for ccgan also $CCGAN_TRANSLATOR (`ccgan.translator_path`);
+    otherwise the method's default file, which may be absent.
+    """
+    if method == "ccgan":
+        from ccgan.translator import translator_path
+
+        asked = cfg.ccgan_path is not None or bool(os.environ.get("CCGAN_TRANSLATOR"))
+        return translator_path(cfg.ccgan_path), asked
+    given, default = {
+        "ccgan_sim": (cfg.ccgan_sim_path, CCGAN_SIM_DEFAULT_PATH),
+        "wcgan": (cfg.wcgan_path, WCGAN_DEFAULT_PATH),
+    }[method]
+    return Path(given or default), given is not None
+
+
+class Translator:
+    """A loaded translator method: `translate(p_s [T, 3], poses_s [T, 6], seed)`.
+
+    With `trained_seeds` ({seed: translator}, several independently trained models) the seed
+    picks the model, so a method's mean ± std spans training seeds. `model_hashes` holds the
+    `Arm.model_hash`es its files record as the arm they were trained on (files written before
+    that was recorded add none).
+    """
+
+    def __init__(
+        self,
+        name: str,
+        obj,
+        trained_seeds: dict | None = None,
+        model_hashes: frozenset = frozenset(),
+    ):
+        self.name = name
+        self._obj = obj
+        self.trained_seeds = trained_seeds or {}
+        self.model_hashes = frozenset(model_hashes)
+        try:
+            params = inspect.signature(obj.translate).parameters
+        except (TypeError, ValueError):
+            params = {}
+        self.takes_seed = "seed" in params or bool(self.trained_seeds)
+
+    def translate(self, pressures_s: np.ndarray, poses_s: np.ndarray, seed: int):
+        """Returns (D_c commands [T * k, 3] bar, k)."""
+        if self.trained_seeds:
+            out = self.trained_seeds[seed].translate(pressures_s, poses_s)
+        elif self.takes_seed:
+            out = self._obj.translate(pressures_s, poses_s, seed=seed)
+        else:
+            out = self._obj.translate(pressures_s, poses_s)
+        commands, k = out
+        commands = np.asarray(commands, dtype=np.float64)
+        k = int(k)
+        if commands.shape != (pressures_s.shape[0] * k, 3):
+            raise ValueError(
+                f"{self.name}.translate returned {commands.shape}, expected"
+                f" ({pressures_s.shape[0] * k}, 3) for k = {k}"
+            )
+        return commands, k
+
+
+def load_translator(method: str, cfg) -> tuple[Translator | None, str]:
+    """Loads a translator method's checkpoint (`translator_source`) with `ccgan.load_translator`.
+
+    Only a default checkpoint may be absent: then (None, a note naming the file and the flag that
+    gives another). One that was asked for (`translator_source`) and is absent, or any that does
+    not load, raises, so a run never reports a table without the method it was asked to score.
+    The arms the files record (`ccgan.finetune.trained_model_hash`) go into
+    `Translator.model_hashes`, for `check_translator_arms`.
+
+    Args:
+      method: one of TRANSLATOR_METHODS.
+      cfg: an `eval.pipeline.EvalConfig`; its paths and seeds are read.
+
+    Returns:
+      (translator, "loaded" or what was loaded) or (None, why).
+
+    Raises:
+      TranslatorError: an asked-for checkpoint is absent, or a checkpoint does not load.
+    """
+    path, asked = translator_source(method, cfg)
+    flag = PATH_FLAGS[method] + (" or $CCGAN_TRANSLATOR" if method == "ccgan" else "")
+    if not path.is_file():
+        if asked:
+            raise TranslatorError(f"{method}: no translator checkpoint at {path} ({flag})")
+        return None, f"no translator at its default {path} (give one with {flag})"
+    from ccgan import checkpoint
+    from ccgan.finetune import trained_model_hash
+    from ccgan.translator import translator_from_checkpoint
+
+    hashes = set()
+
+    def checked(file: Path):
+        """The translator in `file` (as `ccgan.load_translator` reads it); notes its arm."""
+        try:
+            source = checkpoint.load(file)
+            translator = translator_from_checkpoint(source, file)
+        except Exception as err:  # noqa: BLE001  (any failure to load is this error)
+            raise TranslatorError(
+                f"{method}: {file} does not load ({type(err).__name__}: {err})"
+            ) from err
+        hashes.add(trained_model_hash(source[1]))
+        return translator
+
+    obj = checked(path)
+    # Separately trained seeds beside the checkpoint (`ccgan.train --seeds 0 1 2` writes
+    # translator_seed{s}.ckpt): used when there is one for every evaluation seed.
+    seeds, why = {}, "loaded"
+    if len(cfg.seeds) > 1:
+        files = {s: path.parent / f"translator_seed{s}.ckpt" for s in cfg.seeds}
+        if all(f.exists() for f in files.values()):
+            seeds = {s: checked(f) for s, f in files.items()}
+            why = f"loaded, trained seeds {list(cfg.seeds)}"
+    return Translator(method, obj, seeds, frozenset(hashes - {None})), why
+
+
+def check_translator_arms(translators: dict, arm) -> None:
+    """Refuses translators whose files record training on another arm than `arm`.
+
+    Raises:
+      TranslatorError: a file records another `Arm.model_hash` (another MJCF: e.g. the soft arm
+        for translators of the solid-disc one), which would score them on an arm they never saw.
+    """
+    for method, tr in translators.items():
+        other = sorted(tr.model_hashes - {arm.model_hash})
+        if other:
+            raise TranslatorError(
+                f"{method}: trained on the arm with model hash {', '.join(other)}, but the arm"
+                f" evaluated has {arm.model_hash} (choose the arm with --model)"
+            )
+
+
+def forward_model(translators: dict[str, Translator]):
+    """The CCGAN-GP checkpoint's translator when it carries a learned forward model F_c
+    (`predict_poses(commands [N, 3] bar, pose0 [6]) -> poses [N, 6]`), else None.
+
+    The paper scored its translations through F_c, so the evaluation scores every method's D_c
+    commands through it too, beside the simulator.
+    """
+    model = getattr(translators.get("ccgan"), "_obj", None)
+    if model is not None and getattr(model, "f_c_params", None) is None:
+        return None
+    return model
+
+
+def method_seeds(method: str, translators: dict[str, Translator], seeds) -> list[int]:
+    """The seeds a method runs: all of `seeds` for a translator that takes one (it samples, or
+    has one trained model per seed), else the first only (the method is deterministic)."""
+    stochastic = method in translators and translators[method].takes_seed
+    return list(seeds) if stochastic else list(seeds[:1])
+
+
+def method_commands(
+    method: str,
+    pressures_s: np.ndarray,
+    poses_s: np.ndarray,
+    seed: int,
+    translators: dict[str, Translator],
+    k_stretch: int,
+    mpc_commands: np.ndarray | None = None,
+) -> tuple[np.ndarray, int]:
+    """(D_c commands [T * k, 3] bar, k) of one method for a D_s program [T, 3] (bar) with its
+    target poses [T, 6].
+
+    Args:
+      k_stretch: the validated stretch factor (control periods per source step) of stretch and
+        mpc.
+      mpc_commands: mpc's commands for this shape [T * k_stretch, 3] (bar), planned beforehand
+        for every shape at once; only read for "mpc". The oracle is not made here (it optimises
+        every shape together, see `tracking.oracle`).
+    """
+    if method == "none":
+        return np.asarray(pressures_s), 1
+    if method == "stretch":
+        return stretch(pressures_s, k_stretch), k_stretch
+    if method == "mpc":
+        return mpc_commands, k_stretch
+    return translators[method].translate(pressures_s, poses_s, seed)
