@@ -21,7 +21,7 @@ class ConfigError(ValueError):
     """A settings field holds a value the code cannot use.
 
     Raised by the config dataclasses' `__post_init__`, so the Python API and the command line
-    refuse the same values; `ccgan.train.config_from_args` and `eval.pipeline.parse_args` turn it
+    refuse the same values; `ccgan.train.config_from_args` and `eval.shapes.parse_args` turn it
     into a usage error naming the flag.
 
     Attributes:
