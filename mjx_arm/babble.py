@@ -28,22 +28,26 @@ are padded to a multiple of the device count (and all to the same size, so there
 ``--backend c`` runs MuJoCo C `mujoco.rollout` on all CPU cores; ``auto`` picks ``c`` when JAX's
 default backend is the CPU (MJX on CPU is far slower than MuJoCo C) and ``mjx`` otherwise.
 
-Multi-host. Start the same command on every host with ``--distributed`` (it calls
-`jax.distributed.initialize()`, which reads the coordinator address, process count and id from
-the cluster environment -- SLURM, Open MPI, TPU pods -- or from ``JAX_COORDINATOR_ADDRESS``,
-``JAX_NUM_PROCESSES`` and ``JAX_PROCESS_ID``). The mesh then spans all global devices; each host
-builds only its own shards of the (identical, seeded) programs with
-`jax.make_array_from_callback`, the poses are gathered with
-`multihost_utils.process_allgather`, and process 0 alone writes the files.
+Multi-host. Start the same command on every host with ``--distributed --backend mjx`` and
+``--coordinator HOST:PORT --num-processes N --process-id I`` (I = 0 .. N-1; process 0 runs the
+coordinator). Without those options `jax.distributed.initialize()` takes them from the cluster
+(SLURM, Open MPI, TPU pods); of plain environment variables jax 0.10 reads only
+``JAX_COORDINATOR_ADDRESS``, not a process count or id. The mesh then spans all global devices;
+every process checks that all have the same options, model and programs, builds only its own
+shards of them with `jax.make_array_from_callback`, the poses are gathered with
+`multihost_utils.process_allgather`, and process 0 alone writes the files. The data equal, bit
+for bit, a one-process run over as many devices (tests/test_multiprocess.py, docs/multihost.md).
 """
 
 from __future__ import annotations
 
 import argparse
+import copy
 import dataclasses
 import functools
 import json
 import math
+import os
 import sys
 import time
 import zlib
@@ -52,9 +56,11 @@ from pathlib import Path
 
 import jax
 import jax.numpy as jnp
+import mujoco
 import numpy as np
 from jax.sharding import Mesh, NamedSharding
 from jax.sharding import PartitionSpec as P
+from mujoco import mjx
 
 from mjx_arm import arm as arm_lib
 from mjx_arm import constants, dataset, domains, machine
@@ -211,9 +217,8 @@ class ShardedRollout:
         self.n_devices = self.mesh.devices.size
         self.batch_sharding = NamedSharding(self.mesh, P("batch"))
         replicated = NamedSharding(self.mesh, P())
-        self.mjx_model = jax.device_put(arm.mjx_model, replicated)
-        self.rest = jax.device_put(
-            (jnp.asarray(arm.rest_qpos), jnp.asarray(arm.rest_qvel)), replicated
+        self.mjx_model, self.rest = _replicate(
+            (_local_mjx_model(arm), (arm.rest_qpos, arm.rest_qvel)), replicated
         )
         self.fn = _sharded_fn(
             tuple(self.mesh.devices.flat),
@@ -256,6 +261,36 @@ class ShardedRollout:
         n = commands_bar.shape[0]
         poses, ok = self.run_device(self.shard(self.pad(commands_bar, size)))
         return _gather(poses)[:n].astype(np.float32), _gather(ok)[:n]
+
+
+def _replicate(tree, sharding: NamedSharding):
+    """Puts a pytree of arrays, the same on every process, on every device of `sharding`.
+
+    Each process copies its host values to its own devices only: `jax.device_put` of a committed
+    single-device array to another process's devices needs cross-host transfers (which the CPU
+    backend of jax 0.10.2 refuses), and of a host array compares every leaf across processes
+    (one collective per leaf, and float64 model fields then differ from their float32 copies).
+    """
+
+    def put(x):
+        x = np.asarray(x, jax.dtypes.canonicalize_dtype(np.asarray(x).dtype))
+        return jax.make_array_from_callback(x.shape, sharding, lambda index: x[index])
+
+    return jax.tree.map(put, jax.device_get(tree))
+
+
+def _local_mjx_model(arm: arm_lib.Arm) -> mjx.Model:
+    """`arm.mjx_model`, but on this process's own device in a multi-process run.
+
+    `mjx.put_model` puts a model on ``jax.devices()[0]``, which on every process but 0 is another
+    process's device, so its arrays cannot be read there. The two-process test
+    (tests/test_multiprocess.py) checks that this copy gives the same data as `arm.mjx_model`.
+    """
+    if jax.process_count() == 1:
+        return arm.mjx_model
+    m = copy.copy(arm.mj_model)
+    m.opt.disableflags |= mujoco.mjtDisableBit.mjDSBL_SENSOR  # as `Arm.mjx_model`
+    return mjx.put_model(m, device=jax.local_devices()[0])
 
 
 @functools.lru_cache(maxsize=16)
@@ -395,6 +430,7 @@ def babble(
             for split, n in splits.items():
                 bar.set_postfix_str(f"{domain}/{split}")
                 programs = make_programs(config, np.arange(n), domain=domain, split=split)
+                _check_processes_agree(config, backend, arm, programs)
                 poses = simulate(
                     arm,
                     programs,
@@ -420,6 +456,27 @@ def babble(
                 )
     low, high = dataset.workspace_bounds(*(d.poses for d in results))
     return [d.with_bounds(low, high) for d in results]
+
+
+def _check_processes_agree(
+    config: BabbleConfig, backend: str, arm: arm_lib.Arm, programs: np.ndarray
+) -> None:
+    """In a multi-process run, raises RuntimeError (on every process) unless all processes have
+    the same options, model and programs: each fills only its own shards of the batch, so a
+    process started with, say, another --seed would silently mix two runs' data."""
+    if jax.process_count() == 1:
+        return
+    from jax.experimental import multihost_utils
+
+    text = json.dumps(_config_dict(config, backend), sort_keys=True) + arm.model_hash
+    digest = zlib.crc32(programs.tobytes(), zlib.crc32(text.encode())) & 0x7FFFFFFF
+    digests = multihost_utils.process_allgather(np.array([digest], np.int32), tiled=True)
+    if len(set(digests.tolist())) > 1:
+        raise RuntimeError(
+            f"the {jax.process_count()} processes disagree on the babbling options, model or"
+            f" programs (digests by process: {digests.tolist()}); start every process with the"
+            " same command line and MJCF"
+        )
 
 
 def _config_dict(config: BabbleConfig, backend: str) -> dict:
@@ -556,7 +613,29 @@ def build_parser() -> argparse.ArgumentParser:
         default="out/babble",
         help="output folder, written as a whole; an earlier run's folder is replaced",
     )
-    p.add_argument("--distributed", action="store_true", help="call jax.distributed.initialize()")
+    p.add_argument(
+        "--distributed",
+        action="store_true",
+        help="one process of a multi-process run: call jax.distributed.initialize() (with the"
+        " three options below, or from SLURM / Open MPI / JAX_COORDINATOR_ADDRESS)",
+    )
+    p.add_argument(
+        "--coordinator",
+        metavar="HOST:PORT",
+        help="with --distributed: process 0's address, the same on every process (default:"
+        " JAX_COORDINATOR_ADDRESS or the cluster's)",
+    )
+    p.add_argument(
+        "--num-processes",
+        type=_int_at_least(1),
+        help="with --distributed: processes in the run (default: the cluster's)",
+    )
+    p.add_argument(
+        "--process-id",
+        type=_int_at_least(0),
+        help="with --distributed: this process's index, 0 .. num-processes - 1; process 0 writes"
+        " --out (default: the cluster's)",
+    )
     p.add_argument(
         "--cache-dir",
         help="JAX persistent compilation cache folder (default on an accelerator:"
@@ -579,6 +658,10 @@ def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
         args.config = config_from_args(args)
     except ValueError as err:
         p.error(str(err))
+    try:
+        check_distributed_args(args)
+    except ValueError as err:
+        p.error(str(err))
     if args.model is not None and not Path(args.model).is_file():
         p.error(f"--model {args.model}: no such MJCF file")
     try:
@@ -586,6 +669,27 @@ def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
     except OSError as err:
         p.error(f"--out: {err}")
     return args
+
+
+def check_distributed_args(args: argparse.Namespace) -> None:
+    """Raises ValueError unless the multi-process options are consistent."""
+    given = [
+        f"--{name.replace('_', '-')}"
+        for name in ("coordinator", "num_processes", "process_id")
+        if getattr(args, name) is not None
+    ]
+    if given and not args.distributed:
+        raise ValueError(f"{' and '.join(given)}: only with --distributed")
+    if args.coordinator is not None:
+        host, _, port = args.coordinator.rpartition(":")
+        if not host or not port.isdigit() or not 0 < int(port) < 65536:
+            raise ValueError(f"--coordinator must be HOST:PORT, got {args.coordinator!r}")
+    if (args.num_processes is None) != (args.process_id is None):
+        raise ValueError("give --num-processes and --process-id together")
+    if args.process_id is not None and args.process_id >= args.num_processes:
+        raise ValueError(
+            f"--process-id must be < --num-processes ({args.num_processes}), got {args.process_id}"
+        )
 
 
 def config_from_args(args: argparse.Namespace) -> BabbleConfig:
@@ -612,7 +716,14 @@ def config_from_args(args: argparse.Namespace) -> BabbleConfig:
 def main(argv: Sequence[str] | None = None) -> int:
     args = parse_args(argv)
     if args.distributed:
-        jax.distributed.initialize()
+        # Cross-process collectives on the CPU: jax 0.10.2's default, set in case another is.
+        if not os.environ.get("JAX_CPU_COLLECTIVES_IMPLEMENTATION"):
+            jax.config.update("jax_cpu_collectives_implementation", "gloo")
+        jax.distributed.initialize(
+            coordinator_address=args.coordinator,
+            num_processes=args.num_processes,
+            process_id=args.process_id,
+        )
     machine.enable_compilation_cache(args.cache_dir or None)
     start = time.perf_counter()
     paths = run(args.config, args.out, model_path=args.model, progress=not args.no_progress)
@@ -621,6 +732,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     if paths:
         summary = {
             "seconds": round(time.perf_counter() - start, 2),
+            "processes": jax.process_count(),
+            "devices": jax.device_count(),
             "files": [str(p) for p in paths],
         }
         print(json.dumps(summary))
