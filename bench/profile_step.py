@@ -29,6 +29,7 @@ import jax
 
 from bench import run_header
 from bench.train import babbling_data, forward_c_params, synthetic_data, time_epochs
+from ccgan import config as config_lib
 from ccgan import train as train_lib
 from ccgan.models import ForwardModel
 
@@ -175,12 +176,12 @@ def main(argv=None) -> None:
     parser.add_argument("--k", type=int, default=10)
     parser.add_argument("--epochs", type=int, default=2)
     parser.add_argument(
-        "--feedback-impls", nargs="+", default=["lean"], choices=train_lib.FEEDBACK_IMPLS
+        "--feedback-impls", nargs="+", default=["lean"], choices=config_lib.FEEDBACK_IMPLS
     )
     parser.add_argument("--tag", default="")
     args = parser.parse_args(argv)
 
-    config = train_lib.TrainConfig()
+    config = config_lib.TrainConfig()
     fwd = ForwardModel()
     data = babbling_data(Path(args.data), config) if args.data else synthetic_data(10, 600, config)
     fc_params = forward_c_params(fwd, args.forward_c)

@@ -25,6 +25,7 @@ import numpy as np
 
 from bench import run_header
 from ccgan import checkpoint
+from ccgan import config as config_lib
 from ccgan import data as data_lib
 from ccgan import train as train_lib
 from ccgan.models import ForwardModel
@@ -33,7 +34,7 @@ from ccgan.models import ForwardModel
 PAPER_WALL_S = 12 * 3600 + 32 * 60
 
 
-def synthetic_data(n_traj: int, samples: int, config: train_lib.TrainConfig, seed: int = 0):
+def synthetic_data(n_traj: int, samples: int, config: config_lib.TrainConfig, seed: int = 0):
     """Both domains: n_traj trajectories x samples steps, random held pressures, smooth poses."""
     rng = np.random.default_rng(seed)
     arrays = []
@@ -50,7 +51,7 @@ def forward_c_params(fwd: ForwardModel, path: str | None):
     return checkpoint.load(path, target=params)[0] if path else params
 
 
-def babbling_data(folder: Path, config: train_lib.TrainConfig):
+def babbling_data(folder: Path, config: config_lib.TrainConfig):
     """Windows of a babbling folder, prepared as `python -m ccgan.train` does."""
     split = lambda d: [folder / f"{d}_{s}.npz" for s in ("train", "val")]  # noqa: E731
     ps, xs, bounds = train_lib.load_npz(*split("source"))
@@ -200,14 +201,14 @@ def main(argv=None) -> None:
     parser.add_argument(
         "--feedback-impls",
         nargs="+",
-        default=[train_lib.TrainConfig.feedback_impl],
-        choices=train_lib.FEEDBACK_IMPLS,
+        default=[config_lib.TrainConfig.feedback_impl],
+        choices=config_lib.FEEDBACK_IMPLS,
         help="feedback rollout implementations timed (TrainConfig.feedback_impl)",
     )
     args = parser.parse_args(argv)
     args.feedback_impls = [train_lib.resolved_feedback_impl(i) for i in args.feedback_impls]
 
-    config = train_lib.TrainConfig(feedback_impl=args.feedback_impls[0], epochs=args.paper_epochs)
+    config = config_lib.TrainConfig(feedback_impl=args.feedback_impls[0], epochs=args.paper_epochs)
     if args.feedback_unroll:
         config = dataclasses.replace(config, feedback_unroll=args.feedback_unroll)
     fwd = ForwardModel()

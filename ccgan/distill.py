@@ -41,9 +41,9 @@ from pathlib import Path
 import numpy as np
 
 import mjx_arm  # noqa: F401  (before jax: sets the XLA CPU flag)
+from ccgan.cli import add_config_flags, config_from_args
 from ccgan.data import PRESSURE_DIM, normalise_pressure, samples
 from ccgan.finetune import common_k, generator_commands, keep_better, stage_parser, start_stage
-from ccgan.train import add_config_flags, config_from_args
 from ccgan.translator import Translator
 from mjx_arm.programs import shape_like_programs
 from tracking import mpc

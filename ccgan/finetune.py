@@ -60,8 +60,8 @@ import numpy as np
 
 import mjx_arm  # noqa: F401  (before jax: sets the XLA CPU flag)
 from ccgan import checkpoint
+from ccgan.cli import add_config_flags, check_output_dir, cli_parser, config_from_args
 from ccgan.data import PRESSURE_DIM, denormalise_pressure, samples
-from ccgan.train import add_config_flags, check_output_dir, cli_parser, config_from_args
 from ccgan.translator import Translator, translator_from_checkpoint
 from mjx_arm import constants
 from mjx_arm.programs import shape_like_programs

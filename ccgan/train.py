@@ -12,19 +12,17 @@ identity + lambda_f feedback). The feedback term runs the frozen forward model F
 G_c's commands, each held for k control periods (the hold factor k), and compares every k-th pose
 with the D_s target. Every `stretch_every` epochs, the hold factor k is re-chosen from
 `hold_factors` by the tracking error on held-out D_s trajectories.
+
+The settings (`TrainConfig`) live in `ccgan.config`, the flags made from them in `ccgan.cli`.
 """
 
 from __future__ import annotations
 
 import argparse
-import ast
 import csv
 import dataclasses
-import inspect
 import json
 import os
-import re
-import textwrap
 import warnings
 from pathlib import Path
 from typing import Any, NamedTuple
@@ -38,6 +36,21 @@ from jax.sharding import Mesh, NamedSharding
 from jax.sharding import PartitionSpec as P
 
 from ccgan import checkpoint, losses
+from ccgan.cli import (
+    add_config_flags,
+    add_data_flags,
+    check_output_dir,
+    cli_parser,
+    config_from_args,
+    data_from_args,
+)
+from ccgan.config import (
+    FEEDBACK_IMPLS,
+    RENAMED_FIELDS,
+    RETIRED_FEEDBACK_IMPLS,
+    TrainConfig,
+    check_forward_config,
+)
 from ccgan.data import PRESSURE_DIM, TranslationData, read_domain
 from ccgan.forward import ForwardConfig
 from ccgan.models import (
@@ -47,353 +60,10 @@ from ccgan.models import (
     forward_stretched,
     forward_stretched_masked,
 )
-from tracking.config import ConfigError, check_fields
+from tracking.config import ConfigError  # noqa: F401  (kept importable as ccgan.train.ConfigError)
 from tracking.metrics import position_error_cm
 
-# ---------------------------------------------------------------------------------- settings
-
-#: The feedback rollouts `TrainConfig.feedback_impl` can name.
-FEEDBACK_IMPLS = ("auto", "lean", "lean_reduce")
-#: Rollouts that were options once and lost (docs/benchmarks.md, "Retired experiments"). A
-#: config naming one is refused; a stored run naming one resumes with this run's rollout.
-RETIRED_FEEDBACK_IMPLS = ("cell", "pallas")
-#: `TrainConfig` fields renamed since runs were first stored, {old name: new name}. A stored
-#: config (checkpoint metadata) reads through `stored_config`; the old flag stays a hidden alias.
-RENAMED_FIELDS = {"stretch_choices": "hold_factors"}
-
-
-def stored_config(config: dict) -> dict:
-    """A stored `TrainConfig` dict (checkpoint metadata), renamed fields under their new names."""
-    return {RENAMED_FIELDS.get(name, name): value for name, value in config.items()}
-
-
-def _first_sentence(text: str) -> str:
-    text = " ".join(text.split())
-    return re.split(r'(?<=[a-z0-9)\]])\.\s+(?=[A-Z"`])', text, maxsplit=1)[0]
-
-
-def field_docs(cls) -> dict[str, str]:
-    """{field: the first sentence of its documentation} for a dataclass, for `--help`.
-
-    A field is documented by `#:` comment lines right above it or by a string right below it
-    (both styles occur in this package); the documentation stays in one place, the class.
-    """
-    src = textwrap.dedent(inspect.getsource(cls))
-    lines = src.splitlines()
-    body = next(n for n in ast.parse(src).body if isinstance(n, ast.ClassDef)).body
-    docs = {}
-    for i, node in enumerate(body):
-        if not (isinstance(node, ast.AnnAssign) and isinstance(node.target, ast.Name)):
-            continue
-        after = body[i + 1] if i + 1 < len(body) else None
-        if isinstance(after, ast.Expr) and isinstance(after.value, ast.Constant):
-            text = str(after.value.value)
-        else:
-            comments, j = [], node.lineno - 2
-            while j >= 0 and lines[j].strip().startswith("#:"):
-                comments.insert(0, lines[j].strip()[2:])
-                j -= 1
-            text = " ".join(comments)
-        docs[node.target.id] = _first_sentence(text)
-    return docs
-
-
-class HelpFormatter(argparse.ArgumentDefaultsHelpFormatter):
-    """Shows each option's default, except where there is none to show (None, a switch off)."""
-
-    def _get_help_string(self, action):
-        if action.default is None or (action.nargs == 0 and action.default is False):
-            return action.help
-        return super()._get_help_string(action)
-
-
-def cli_parser(module: str, doc: str) -> argparse.ArgumentParser:
-    """The parser of `python -m <module>`: its name, the first line of `doc`, shown defaults."""
-    return argparse.ArgumentParser(
-        prog=f"python -m {module}",
-        description=doc.strip().splitlines()[0],
-        formatter_class=HelpFormatter,
-    )
-
-
-def add_config_flags(
-    parser: argparse.ArgumentParser,
-    cls,
-    skip: tuple[str, ...] = (),
-    prefix: str = "",
-    choices: dict[str, tuple] | None = None,
-) -> None:
-    """Adds one flag per field of the dataclass `cls`: `--<prefix><field-name>`.
-
-    Each flag's help is the field's documentation (`field_docs`), its default the field's;
-    bools become switches, tuples take several values. Read them back with `config_from_args`.
-
-    Args:
-      parser: the parser (the flags go into a group named after `cls`).
-      cls: a dataclass with defaults.
-      skip: fields without a flag (they keep their defaults).
-      prefix: flag prefix, e.g. "forward-" for `--forward-epochs`.
-      choices: {field: allowed values}.
-    """
-    docs = field_docs(cls)
-    doc = (cls.__doc__ or "").strip().splitlines()
-    group = parser.add_argument_group(cls.__name__, doc[0] if doc else None)
-    for f in dataclasses.fields(cls):
-        if f.name in skip:
-            continue
-        flag = "--" + (prefix + f.name).replace("_", "-")
-        kw = {
-            "dest": (prefix + f.name).replace("-", "_"),
-            "default": f.default,
-            "help": docs.get(f.name, "").replace("%", "%%") or f.name.replace("_", " "),
-        }
-        if f.type in ("bool", bool):
-            group.add_argument(flag, action="store_true", **kw)
-        elif "tuple" in str(f.type):
-            typ = float if "float" in str(f.type) else int
-            # tuple[float, float] takes exactly two values; tuple[int, ...] one or more.
-            nargs = "+" if "..." in str(f.type) else str(f.type).count(",") + 1
-            group.add_argument(flag, type=typ, nargs=nargs, **kw | {"default": list(f.default)})
-        else:
-            typ = {"int": int, "float": float}.get(str(f.type), type(f.default))
-            group.add_argument(flag, type=typ, choices=(choices or {}).get(f.name), **kw)
-    for old, new in getattr(cls, "RENAMED_FIELDS", {}).items():
-        if new not in skip:
-            # The old flag, hidden: same destination, so it sets the renamed field.
-            action = next(
-                a for a in group._group_actions if a.dest == (prefix + new).replace("-", "_")
-            )
-            group.add_argument(
-                "--" + (prefix + old).replace("_", "-"),
-                dest=action.dest,
-                type=action.type,
-                nargs=action.nargs,
-                help=argparse.SUPPRESS,
-            )
-
-
-def config_from_args(
-    parser: argparse.ArgumentParser,
-    args,
-    cls,
-    skip: tuple[str, ...] = (),
-    prefix: str = "",
-    check=None,
-):
-    """The `cls` instance of flags added by `add_config_flags`; invalid values are usage errors.
-
-    Args:
-      parser, args: the parser and its parsed arguments.
-      cls, skip, prefix: as given to `add_config_flags`.
-      check: optional callable(config) raising ConfigError, for classes without their own.
-
-    Returns:
-      The config. A `ConfigError` (from the class or `check`) exits with `parser.error`
-      (status 2) naming the flag, before the caller starts any work.
-    """
-    kw = {}
-    for f in dataclasses.fields(cls):
-        if f.name not in skip:
-            v = getattr(args, (prefix + f.name).replace("-", "_"))
-            kw[f.name] = tuple(v) if isinstance(v, list) else v
-    try:
-        config = cls(**kw)
-        if check is not None:
-            check(config)
-    except ConfigError as err:
-        parser.error(f"--{(prefix + err.field).replace('_', '-')} {err.problem}")
-    return config
-
-
-def check_forward_config(config: ForwardConfig) -> None:
-    """Refuses forward-model settings that cannot train (`ForwardConfig` has no checks).
-
-    Raises:
-      ConfigError: epochs, batch_size, hidden or fc < 1; lr <= 0; weight_decay < 0.
-    """
-    check_fields(
-        config,
-        at_least={"epochs": 1, "batch_size": 1, "hidden": 1, "fc": 1, "weight_decay": 0},
-        above={"lr": 0},
-    )
-
-
-def check_output_dir(parser: argparse.ArgumentParser, flag: str, path) -> None:
-    """Usage error unless `path` is a folder or can be made one (no file on its way)."""
-    for part in (Path(path), *Path(path).parents):
-        if part.exists() and not part.is_dir():
-            parser.error(f"{flag} {path}: {part} exists and is not a folder")
-
-
-def add_data_flags(parser: argparse.ArgumentParser) -> None:
-    """--source, --constrained (babbling .npz files) and --model; read with `data_from_args`."""
-    parser.add_argument(
-        "--source", nargs="+", required=True, help="D_s dataset files (train, then val)"
-    )
-    parser.add_argument(
-        "--constrained",
-        nargs="+",
-        required=True,
-        help="D_c dataset files (train, then val) of one non-source domain: constrained, aged...",
-    )
-    parser.add_argument(
-        "--model",
-        default=None,
-        help="MJCF of the arm the data must come from (its model hash is checked);"
-        " default: any, as long as every file agrees",
-    )
-
-
-def data_from_args(parser: argparse.ArgumentParser, args):
-    """The (D_s, D_c) `ccgan.data.DomainData` of `add_data_flags`' flags.
-
-    Unreadable, mixed or wrong-arm files and an unloadable --model are usage errors (status 2)
-    with the message naming the files, instead of a traceback.
-    """
-    import mjx_arm
-    from ccgan.data import read_translation_files
-    from mjx_arm.dataset import DatasetError, ModelHashMismatchError
-
-    model_hash = None
-    if args.model is not None:
-        try:
-            model_hash = mjx_arm.load(args.model).model_hash
-        except (FileNotFoundError, ValueError) as err:
-            parser.error(f"--model {args.model}: {err}")
-    try:
-        return read_translation_files(args.source, args.constrained, model_hash)
-    except ModelHashMismatchError as err:
-        parser.error(f"{err} (--model {args.model} has model hash {model_hash})")
-    except DatasetError as err:
-        parser.error(str(err))
-
-
-@dataclasses.dataclass(frozen=True)
-class TrainConfig:
-    """CCGAN-GP settings; defaults are the paper's where it gives one."""
-
-    #: Passes over the training windows (paper: 550).
-    epochs: int = 550
-    #: Windows per step and domain (paper: 10), split over local devices.
-    batch_size: int = 10
-    #: Control steps per training window (not in the paper; >= 2 for the instance-norm critic).
-    window_length: int = 10
-    #: Step between window starts (0 = window_length, non-overlapping).
-    window_stride: int = 0
-    #: Trajectories per domain held out for validation (paper: 3).
-    n_val: int = 3
-    #: Generator learning rate (paper: 1e-4).
-    lr_generator: float = 1e-4
-    #: Critic learning rate (paper: 2e-4).
-    lr_critic: float = 2e-4
-    #: AdamW first-moment decay beta1 (paper: 0.5).
-    beta1: float = 0.5
-    #: AdamW second-moment decay beta2 (paper: 0.999).
-    beta2: float = 0.999
-    #: AdamW decoupled weight decay (paper: unstated; PyTorch's AdamW default 1e-2).
-    weight_decay: float = 1e-2
-    #: Cycle-loss weight lambda_c (paper code: 10).
-    lambda_cycle: float = 10.0
-    #: Identity-loss weight (paper: 1).
-    lambda_identity: float = 1.0
-    #: Feedback-loss weight lambda_f (paper code: 5).
-    lambda_feedback: float = 5.0
-    #: Gradient-penalty weight (paper code: 10).
-    lambda_gp: float = 10.0
-    #: Hold factors k (control periods each translated command is held) to choose from
-    #: (paper: 5..30). Formerly `stretch_choices` (`RENAMED_FIELDS`).
-    hold_factors: tuple[int, ...] = (5, 10, 15, 20, 25, 30)
-    #: Epochs between choices of k (the paper's N; also chosen once before training).
-    stretch_every: int = 10
-    #: Control steps per held-out window when choosing k (0 = whole trajectories). Each window
-    #: starts F_c from the recorded pose, so the windows run in parallel: the choice costs
-    #: val_window_length * k_max sequential F_c periods instead of T_val * k_max.
-    val_window_length: int = 100
-    #: LSTM time steps per loop iteration in the generators (numerics unchanged).
-    gen_unroll: int = 10
-    #: F_c periods per loop iteration in the feedback rollout and the choice of k.
-    feedback_unroll: int = 25
-    #: The feedback rollout, one of `models.forward_stretched`'s ("lean", "lean_reduce"), or
-    #: "auto": "lean_reduce" on a GPU, where XLA fuses its multiply-and-sum products into fewer
-    #: kernels, "lean" elsewhere, where those products are slower than a matrix product
-    #: (docs/benchmarks.md).
-    feedback_impl: str = "auto"
-    #: WCGAN-GP baseline: one generator and one critic on D_c only, no cycle/identity loss.
-    baseline: bool = False
-    #: Epochs between checkpoints (also the driver's jitted chunk and tqdm tick).
-    checkpoint_every: int = 10
-    #: Generator LSTM width (paper: 32).
-    gen_hidden: int = 32
-    #: Generator FC width (paper: 128).
-    gen_fc: int = 128
-    #: Critic Conv1D widths (five layers).
-    critic_features: tuple[int, ...] = (32, 64, 64, 128, 128)
-
-    #: Old field names (not a field: no annotation); `add_config_flags` keeps their flags hidden.
-    RENAMED_FIELDS = RENAMED_FIELDS
-
-    def __post_init__(self):
-        """Refuses settings that would fail late or train nothing (ConfigError names the field).
-
-        A window of one step makes the instance-norm critic's output constant, so the critic
-        and adversarial losses are exactly 0: window_length must be >= 2.
-        """
-        check_fields(
-            self,
-            at_least={
-                "epochs": 1,
-                "batch_size": 1,
-                "window_length": 2,
-                "window_stride": 0,
-                "n_val": 1,
-                "beta1": 0,
-                "beta2": 0,
-                "weight_decay": 0,
-                "lambda_cycle": 0,
-                "lambda_identity": 0,
-                "lambda_feedback": 0,
-                "lambda_gp": 0,
-                "hold_factors": 1,
-                "stretch_every": 1,
-                "val_window_length": 0,
-                "gen_unroll": 1,
-                "feedback_unroll": 1,
-                "checkpoint_every": 1,
-                "gen_hidden": 1,
-                "gen_fc": 1,
-                "critic_features": 1,
-            },
-            above={"lr_generator": 0, "lr_critic": 0},
-            below={"beta1": 1, "beta2": 1},
-        )
-        if self.feedback_impl not in FEEDBACK_IMPLS:
-            retired = (
-                ", a retired rollout (docs/benchmarks.md)"
-                if self.feedback_impl in RETIRED_FEEDBACK_IMPLS
-                else ""
-            )
-            raise ConfigError(
-                "feedback_impl",
-                f"must be one of {FEEDBACK_IMPLS}, got {self.feedback_impl!r}{retired}",
-            )
-
-    @property
-    def stride(self) -> int:
-        return self.window_stride or self.window_length
-
-    @property
-    def k_max(self) -> int:
-        return max(self.hold_factors)
-
-    def to_dict(self) -> dict:
-        return json.loads(json.dumps(dataclasses.asdict(self)))
-
-    @classmethod
-    def from_dict(cls, config: dict) -> TrainConfig:
-        """The config of a `to_dict` dict, old field names (`RENAMED_FIELDS`) included."""
-        return cls(
-            **{k: tuple(v) if isinstance(v, list) else v for k, v in stored_config(config).items()}
-        )
+# ---------------------------------------------------------------------------------- state
 
 
 @flax.struct.dataclass
@@ -525,6 +195,12 @@ def make_trainer(
     Returns:
       `Trainer`.
     """
+    # One closure on purpose (purejaxrl's make_train): the data, networks, optimisers and
+    # frozen F_c are bound once here, and the named steps below (choose_k, critic_losses,
+    # generator_outputs, generator_losses, train_step, epoch_fn) read them without threading a
+    # dozen arguments through jit/vmap/scan. Split out, each would take that context as
+    # arguments and the compiled program would be the same; read top to bottom, this is the
+    # whole training algorithm in one place.
     fwd = forward_model or ForwardModel()
     gen = Generator(hidden=config.gen_hidden, fc=config.gen_fc, unroll=config.gen_unroll)
     critic = Critic(features=config.critic_features)

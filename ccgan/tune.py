@@ -35,21 +35,18 @@ import optuna
 from ccgan import checkpoint
 from ccgan import data as data_lib
 from ccgan import forward as forward_lib
-from ccgan.train import (
-    ConfigError,
-    TrainConfig,
+from ccgan.cli import (
     add_config_flags,
     add_data_flags,
-    check_fields,
-    check_forward_config,
     check_output_dir,
     cli_parser,
     config_from_args,
-    data_fingerprint,
     data_from_args,
-    make_trainer,
 )
+from ccgan.config import TrainConfig, check_forward_config
+from ccgan.train import data_fingerprint, make_trainer
 from mjx_arm.machine import cpu_model
+from tracking.config import ConfigError, check_fields
 
 #: The TrainConfig fields the search sets; every other field comes from the base config.
 TUNED = ("lambda_cycle", "lambda_feedback", "lr_generator", "lr_critic", "window_length")

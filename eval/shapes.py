@@ -17,7 +17,7 @@ import argparse
 import sys
 import time
 
-from ccgan.train import HelpFormatter
+from ccgan.cli import HelpFormatter
 from eval.methods import DEFAULT_METHODS, METHODS, PATH_FLAGS, TranslatorError
 from eval.pipeline import RESULTS_DIR, RUNS_DIR, EvalConfig, default_methods, evaluate, quick
 from mjx_arm import programs

@@ -23,7 +23,8 @@ import jax
 
 from ccgan import data as data_lib
 from ccgan import forward as forward_lib
-from ccgan.train import TrainConfig, load_npz
+from ccgan.config import TrainConfig
+from ccgan.train import load_npz
 from ccgan.tune import ForwardCache, make_validation_run, validation_error_cm
 from mjx_arm.machine import cpu_model
 

@@ -16,6 +16,7 @@ import pytest
 import ccgan
 import mjx_arm  # noqa: F401  (sets the XLA CPU flag before JAX creates its backend)
 from ccgan import checkpoint, losses, models
+from ccgan import config as config_lib
 from ccgan import data as data_lib
 from ccgan import forward as forward_lib
 from ccgan import train as train_lib
@@ -244,7 +245,7 @@ def test_checkpoint_round_trip_and_refusals(tmp_path):
 # ----------------------------------------------------------------------------- training
 
 
-TINY = train_lib.TrainConfig(
+TINY = config_lib.TrainConfig(
     epochs=4,
     batch_size=4,
     window_length=5,
@@ -348,9 +349,9 @@ def test_end_to_end_and_resume_equals_uninterrupted(tiny_setup, tmp_path):
 
 
 def test_retired_feedback_rollouts_are_refused_by_name():
-    for impl in train_lib.RETIRED_FEEDBACK_IMPLS:
+    for impl in config_lib.RETIRED_FEEDBACK_IMPLS:
         with pytest.raises(train_lib.ConfigError, match=f"got '{impl}', a retired rollout"):
-            train_lib.TrainConfig(feedback_impl=impl)
+            config_lib.TrainConfig(feedback_impl=impl)
 
 
 def test_corrupt_training_checkpoint_refused(tiny_setup, tmp_path):
@@ -392,11 +393,11 @@ def test_two_devices_train_like_one(tiny_setup, tmp_path):
     code = f"""
 import dataclasses, pickle, numpy as np
 import mjx_arm, jax
-from ccgan import train as train_lib
+from ccgan import config as config_lib, train as train_lib
 from tracking import metrics
 assert len(jax.devices()) == 2
 data, fconf, fparams = pickle.loads(open({str(tmp_path / "setup.pkl")!r}, "rb").read())
-config = train_lib.TrainConfig(**{config.to_dict()!r})
+config = config_lib.TrainConfig(**{config.to_dict()!r})
 config = dataclasses.replace(config, **{{f: tuple(getattr(config, f)) for f in
     ("hold_factors", "critic_features")}})
 train = train_lib.make_train(config, data, fparams, fconf.model)

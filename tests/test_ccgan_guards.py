@@ -15,6 +15,8 @@ import pytest
 
 import mjx_arm
 from ccgan import checkpoint, distill, finetune, load_translator, tune
+from ccgan import cli as cli_lib
+from ccgan import config as config_lib
 from ccgan import data as data_lib
 from ccgan import forward as forward_lib
 from ccgan import train as train_lib
@@ -22,6 +24,7 @@ from ccgan.models import Generator
 from ccgan.translator import Translator, translator_path
 from mjx_arm import constants
 from mjx_arm.dataset import Dataset, DatasetError, ModelHashMismatchError, save_dataset
+from tracking.config import ConfigError
 
 # ----------------------------------------------------------------------------- fixtures
 
@@ -169,17 +172,17 @@ def test_old_stretch_choices_name_still_reads():
     parser = train_lib.build_parser()
     argv = ["--source", "s.npz", "--constrained", "c.npz", "--workdir", "w"]
     args = parser.parse_args([*argv, "--stretch-choices", "3", "4"])
-    assert train_lib.config_from_args(parser, args, train_lib.TrainConfig).hold_factors == (3, 4)
+    assert cli_lib.config_from_args(parser, args, config_lib.TrainConfig).hold_factors == (3, 4)
     assert "stretch-choices" not in parser.format_help()
-    stored = train_lib.TrainConfig(hold_factors=(2, 7)).to_dict()
+    stored = config_lib.TrainConfig(hold_factors=(2, 7)).to_dict()
     stored["stretch_choices"] = stored.pop("hold_factors")
-    assert train_lib.TrainConfig.from_dict(stored).hold_factors == (2, 7)
+    assert config_lib.TrainConfig.from_dict(stored).hold_factors == (2, 7)
 
 
 def test_run_stored_with_stretch_choices_resumes_under_hold_factors(tmp_path):
-    config = train_lib.TrainConfig(hold_factors=(2, 7))
+    config = config_lib.TrainConfig(hold_factors=(2, 7))
     meta = {"config": config.to_dict(), "data": "d", "seeds": [0]}
-    old = meta | {"config": train_lib.stored_config(meta["config"])}
+    old = meta | {"config": config_lib.stored_config(meta["config"])}
     old["config"]["stretch_choices"] = old["config"].pop("hold_factors")
     path = checkpoint.save(tmp_path / "state.ckpt", {"x": np.zeros(2)}, old)
     with pytest.raises(checkpoint.CheckpointError):
@@ -191,7 +194,7 @@ def test_committed_translator_config_reads_with_the_renamed_field():
     path = constants.ROOT / "results" / "ccgan" / "translator_seed0.ckpt"
     stored = checkpoint.read(path)[0]["config"]
     assert "stretch_choices" in stored
-    config = train_lib.TrainConfig.from_dict(stored)
+    config = config_lib.TrainConfig.from_dict(stored)
     assert config.hold_factors == tuple(stored["stretch_choices"])
     assert load_translator(path).k in config.hold_factors
 
@@ -207,13 +210,13 @@ def test_train_cli_refuses_a_file_as_workdir(tmp_path, files, capsys):
 @pytest.mark.parametrize(
     "cls, kwargs, field",
     [
-        (train_lib.TrainConfig, {"epochs": 0}, "epochs"),
-        (train_lib.TrainConfig, {"lr_generator": -1.0}, "lr_generator"),
-        (train_lib.TrainConfig, {"window_length": 1}, "window_length"),
-        (train_lib.TrainConfig, {"batch_size": 0}, "batch_size"),
-        (train_lib.TrainConfig, {"hold_factors": ()}, "hold_factors"),
-        (train_lib.TrainConfig, {"lambda_cycle": float("inf")}, "lambda_cycle"),
-        (train_lib.TrainConfig, {"feedback_impl": "fast"}, "feedback_impl"),
+        (config_lib.TrainConfig, {"epochs": 0}, "epochs"),
+        (config_lib.TrainConfig, {"lr_generator": -1.0}, "lr_generator"),
+        (config_lib.TrainConfig, {"window_length": 1}, "window_length"),
+        (config_lib.TrainConfig, {"batch_size": 0}, "batch_size"),
+        (config_lib.TrainConfig, {"hold_factors": ()}, "hold_factors"),
+        (config_lib.TrainConfig, {"lambda_cycle": float("inf")}, "lambda_cycle"),
+        (config_lib.TrainConfig, {"feedback_impl": "fast"}, "feedback_impl"),
         (tune.SearchSpace, {"window_lengths": (1, 5)}, "window_lengths"),
         (tune.SearchSpace, {"lr_critic": (1e-3, 1e-5)}, "lr_critic"),
         (finetune.FinetuneConfig, {"steps": 0}, "steps"),
@@ -228,14 +231,14 @@ def test_train_cli_refuses_a_file_as_workdir(tmp_path, files, capsys):
     ],
 )
 def test_configs_refuse_unusable_values(cls, kwargs, field):
-    with pytest.raises(train_lib.ConfigError, match=f"^{field} ") as exc:
+    with pytest.raises(ConfigError, match=f"^{field} ") as exc:
         cls(**kwargs)
     assert exc.value.field == field and isinstance(exc.value, ValueError)
 
 
 def test_tuned_hyperparameters_still_trace():
     """`ccgan.tune` replaces learning rates by traced values inside jit: not checked there."""
-    f = jax.jit(lambda lr: dataclasses.replace(train_lib.TrainConfig(), lr_generator=lr).epochs)
+    f = jax.jit(lambda lr: dataclasses.replace(config_lib.TrainConfig(), lr_generator=lr).epochs)
     assert f(jnp.float32(1e-3)) == 550
 
 

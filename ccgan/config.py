@@ -1,0 +1,170 @@
+"""The settings of CCGAN training: `TrainConfig`, and the check of `ccgan.forward.ForwardConfig`.
+
+Each field's `#:` comment is its documentation and its `--help` line (`ccgan.cli.field_docs`).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+from typing import TYPE_CHECKING
+
+from tracking.config import ConfigError, check_fields
+
+if TYPE_CHECKING:
+    from ccgan.forward import ForwardConfig
+
+#: The feedback rollouts `TrainConfig.feedback_impl` can name.
+FEEDBACK_IMPLS = ("auto", "lean", "lean_reduce")
+#: Rollouts that were options once and lost (docs/benchmarks.md, "Retired experiments"). A
+#: config naming one is refused; a stored run naming one resumes with this run's rollout.
+RETIRED_FEEDBACK_IMPLS = ("cell", "pallas")
+#: `TrainConfig` fields renamed since runs were first stored, {old name: new name}. A stored
+#: config (checkpoint metadata) reads through `stored_config`; the old flag stays a hidden alias.
+RENAMED_FIELDS = {"stretch_choices": "hold_factors"}
+
+
+def stored_config(config: dict) -> dict:
+    """A stored `TrainConfig` dict (checkpoint metadata), renamed fields under their new names."""
+    return {RENAMED_FIELDS.get(name, name): value for name, value in config.items()}
+
+
+@dataclasses.dataclass(frozen=True)
+class TrainConfig:
+    """CCGAN-GP settings; defaults are the paper's where it gives one."""
+
+    #: Passes over the training windows (paper: 550).
+    epochs: int = 550
+    #: Windows per step and domain (paper: 10), split over local devices.
+    batch_size: int = 10
+    #: Control steps per training window (not in the paper; >= 2 for the instance-norm critic).
+    window_length: int = 10
+    #: Step between window starts (0 = window_length, non-overlapping).
+    window_stride: int = 0
+    #: Trajectories per domain held out for validation (paper: 3).
+    n_val: int = 3
+    #: Generator learning rate (paper: 1e-4).
+    lr_generator: float = 1e-4
+    #: Critic learning rate (paper: 2e-4).
+    lr_critic: float = 2e-4
+    #: AdamW first-moment decay beta1 (paper: 0.5).
+    beta1: float = 0.5
+    #: AdamW second-moment decay beta2 (paper: 0.999).
+    beta2: float = 0.999
+    #: AdamW decoupled weight decay (paper: unstated; PyTorch's AdamW default 1e-2).
+    weight_decay: float = 1e-2
+    #: Cycle-loss weight lambda_c (paper code: 10).
+    lambda_cycle: float = 10.0
+    #: Identity-loss weight (paper: 1).
+    lambda_identity: float = 1.0
+    #: Feedback-loss weight lambda_f (paper code: 5).
+    lambda_feedback: float = 5.0
+    #: Gradient-penalty weight (paper code: 10).
+    lambda_gp: float = 10.0
+    #: Hold factors k (control periods each translated command is held) to choose from
+    #: (paper: 5..30). Formerly `stretch_choices` (`RENAMED_FIELDS`).
+    hold_factors: tuple[int, ...] = (5, 10, 15, 20, 25, 30)
+    #: Epochs between choices of k (the paper's N; also chosen once before training).
+    stretch_every: int = 10
+    #: Control steps per held-out window when choosing k (0 = whole trajectories). Each window
+    #: starts F_c from the recorded pose, so the windows run in parallel: the choice costs
+    #: val_window_length * k_max sequential F_c periods instead of T_val * k_max.
+    val_window_length: int = 100
+    #: LSTM time steps per loop iteration in the generators (numerics unchanged).
+    gen_unroll: int = 10
+    #: F_c periods per loop iteration in the feedback rollout and the choice of k.
+    feedback_unroll: int = 25
+    #: The feedback rollout, one of `models.forward_stretched`'s ("lean", "lean_reduce"), or
+    #: "auto": "lean_reduce" on a GPU, where XLA fuses its multiply-and-sum products into fewer
+    #: kernels, "lean" elsewhere, where those products are slower than a matrix product
+    #: (docs/benchmarks.md).
+    feedback_impl: str = "auto"
+    #: WCGAN-GP baseline: one generator and one critic on D_c only, no cycle/identity loss.
+    baseline: bool = False
+    #: Epochs between checkpoints (also the driver's jitted chunk and tqdm tick).
+    checkpoint_every: int = 10
+    #: Generator LSTM width (paper: 32).
+    gen_hidden: int = 32
+    #: Generator FC width (paper: 128).
+    gen_fc: int = 128
+    #: Critic Conv1D widths (five layers).
+    critic_features: tuple[int, ...] = (32, 64, 64, 128, 128)
+
+    #: Old field names (not a field: no annotation); `add_config_flags` keeps their flags hidden.
+    RENAMED_FIELDS = RENAMED_FIELDS
+
+    def __post_init__(self):
+        """Refuses settings that would fail late or train nothing (ConfigError names the field).
+
+        A window of one step makes the instance-norm critic's output constant, so the critic
+        and adversarial losses are exactly 0: window_length must be >= 2.
+        """
+        check_fields(
+            self,
+            at_least={
+                "epochs": 1,
+                "batch_size": 1,
+                "window_length": 2,
+                "window_stride": 0,
+                "n_val": 1,
+                "beta1": 0,
+                "beta2": 0,
+                "weight_decay": 0,
+                "lambda_cycle": 0,
+                "lambda_identity": 0,
+                "lambda_feedback": 0,
+                "lambda_gp": 0,
+                "hold_factors": 1,
+                "stretch_every": 1,
+                "val_window_length": 0,
+                "gen_unroll": 1,
+                "feedback_unroll": 1,
+                "checkpoint_every": 1,
+                "gen_hidden": 1,
+                "gen_fc": 1,
+                "critic_features": 1,
+            },
+            above={"lr_generator": 0, "lr_critic": 0},
+            below={"beta1": 1, "beta2": 1},
+        )
+        if self.feedback_impl not in FEEDBACK_IMPLS:
+            retired = (
+                ", a retired rollout (docs/benchmarks.md)"
+                if self.feedback_impl in RETIRED_FEEDBACK_IMPLS
+                else ""
+            )
+            raise ConfigError(
+                "feedback_impl",
+                f"must be one of {FEEDBACK_IMPLS}, got {self.feedback_impl!r}{retired}",
+            )
+
+    @property
+    def stride(self) -> int:
+        return self.window_stride or self.window_length
+
+    @property
+    def k_max(self) -> int:
+        return max(self.hold_factors)
+
+    def to_dict(self) -> dict:
+        return json.loads(json.dumps(dataclasses.asdict(self)))
+
+    @classmethod
+    def from_dict(cls, config: dict) -> TrainConfig:
+        """The config of a `to_dict` dict, old field names (`RENAMED_FIELDS`) included."""
+        return cls(
+            **{k: tuple(v) if isinstance(v, list) else v for k, v in stored_config(config).items()}
+        )
+
+
+def check_forward_config(config: ForwardConfig) -> None:
+    """Refuses forward-model settings that cannot train (`ForwardConfig` has no checks).
+
+    Raises:
+      ConfigError: epochs, batch_size, hidden or fc < 1; lr <= 0; weight_decay < 0.
+    """
+    check_fields(
+        config,
+        at_least={"epochs": 1, "batch_size": 1, "hidden": 1, "fc": 1, "weight_decay": 0},
+        above={"lr": 0},
+    )
