@@ -5,7 +5,7 @@ Methods:
   none     D_s pressures straight into D_c (k = 1).
   stretch  D_s pressures, each held k periods; k minimises the tracking error on a separate
            validation program (`mjx_arm.programs.validation_program`), searched over
-           EvalConfig.stretch_candidates = {1, 5, 10, ..., 30}: the GAN's set {5, ..., 30} plus 1.
+           EvalConfig.hold_factors = {1, 5, 10, ..., 30}: the GAN's set {5, ..., 30} plus 1.
   ccgan    the trained CCGAN-GP translator `ccgan.load_translator(path)`. Every translator
            method is skipped with a note when its default checkpoint is absent; one that was
            asked for (--ccgan-path etc.) must load, or the run stops before any work.

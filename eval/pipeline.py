@@ -92,7 +92,7 @@ class EvalConfig:
     """Length of each shape program (s)."""
     backend: str = "c"
     """Simulator backend for every rollout except the oracle's optimisation: "c" or "mjx"."""
-    stretch_candidates: tuple[int, ...] = (1, 5, 10, 15, 20, 25, 30)
+    hold_factors: tuple[int, ...] = (1, 5, 10, 15, 20, 25, 30)
     """Stretch factors k (control periods per source step, >= 1) tried for the stretch baseline."""
     validation_duration_s: float = 20.0
     """Length of the validation program that picks k (s)."""
@@ -145,7 +145,7 @@ class EvalConfig:
         require(
             self.backend in ("c", "mjx"), "backend", f"must be 'c' or 'mjx', got {self.backend!r}"
         )
-        check_ints("stretch_candidates", self.stretch_candidates, 1)  # control periods per step
+        check_ints("hold_factors", self.hold_factors, 1)  # control periods per step
         check_ints("n_repeats", self.n_repeats, 1)
         check_ints("video_fps", self.video_fps, 1)
         require(len(self.video_panel_hw) == 2, "video_panel_hw", "must be (height, width)")
@@ -378,9 +378,7 @@ def _plan(cfg: EvalConfig, arm_s, arm_c, translators: dict, run: RunLog) -> Plan
     if "stretch" in methods or "oracle" in methods or "mpc" in methods:
         t0 = time.perf_counter()
         p_val = programs.validation_program(cfg.validation_duration_s)
-        k_stretch, k_errors = choose_stretch_k(
-            arm_s, arm_c, p_val, cfg.stretch_candidates, cfg.backend
-        )
+        k_stretch, k_errors = choose_stretch_k(arm_s, arm_c, p_val, cfg.hold_factors, cfg.backend)
         run.timings["choose_k_s"] = time.perf_counter() - t0
         run.log(f"stretch k = {k_stretch} (validation X_err cm by k: {k_errors})")
     t0 = time.perf_counter()

@@ -82,7 +82,7 @@ FLAGS = {
     "out_dir": "--out",
     "backend": "--backend",
     "duration_s": "--duration",
-    "stretch_candidates": "--stretch-choices",
+    "hold_factors": "--hold-factors",
     "model_path": "--model",
     "target_domain": "--target-domain",
     **{f"{method}_path": flag for method, flag in PATH_FLAGS.items()},
@@ -164,12 +164,12 @@ def _add_run_options(p: argparse.ArgumentParser) -> None:
         help="length of each shape program (s)",
     )
     p.add_argument(
-        "--stretch-choices",
+        "--hold-factors",
         metavar="K",
         nargs="+",
         type=int,
-        default=list(EvalConfig.stretch_candidates),
-        help="stretch factors k >= 1 (control periods per source step) tried",
+        default=list(EvalConfig.hold_factors),
+        help="hold factors k >= 1 (control periods each source command is held) tried",
     )
     p.add_argument("--render", action="store_true", help="write MP4 videos")
     p.add_argument(
@@ -269,7 +269,7 @@ def parse_args(argv: list[str] | None = None) -> EvalConfig:
             seeds=tuple(a.seeds),
             duration_s=a.duration,
             backend=a.backend,
-            stretch_candidates=tuple(a.stretch_choices),
+            hold_factors=tuple(a.hold_factors),
             render=a.render,
             robustness=not a.no_robustness,
             out_dir=a.out,

@@ -68,7 +68,7 @@ def test_quick_run_is_marked_and_states_its_arm_and_lengths(in_tmp, capsys):
             shapes=("circle",),
             methods=("none", "stretch"),
             duration_s=1.0,
-            stretch_candidates=(1, 2),
+            hold_factors=(1, 2),
             validation_duration_s=0.5,
             robustness=False,
         )
@@ -120,8 +120,8 @@ def test_figures_of_a_quick_run_carry_the_mark(tmp_path):
 @pytest.mark.parametrize(
     ("argv", "flag", "reason"),
     [
-        (["--stretch-choices", "0"], "--stretch-choices", ">= 1, got (0,)"),
-        (["--stretch-choices", "5", "5"], "--stretch-choices", "distinct"),
+        (["--hold-factors", "0"], "--hold-factors", ">= 1, got (0,)"),
+        (["--hold-factors", "5", "5"], "--hold-factors", "distinct"),
         (["--methods", "bogus"], "--methods", "invalid choice"),
         (["--shapes", "square"], "--shapes", "invalid choice"),
         (["--duration", "0"], "--duration", "at least one 0.1 s command"),
@@ -153,8 +153,8 @@ def test_bad_options_are_usage_errors_before_any_work(in_tmp, capsys, argv, flag
 @pytest.mark.parametrize(
     ("kwargs", "field"),
     [
-        ({"stretch_candidates": (0,)}, "stretch_candidates"),
-        ({"stretch_candidates": ()}, "stretch_candidates"),
+        ({"hold_factors": (0,)}, "hold_factors"),
+        ({"hold_factors": ()}, "hold_factors"),
         ({"methods": ("bogus",)}, "methods"),
         ({"methods": ()}, "methods"),
         ({"shapes": ("square",)}, "shapes"),
@@ -206,7 +206,7 @@ def test_a_translator_that_was_asked_for_must_load(small_xml, tmp_path, monkeypa
         methods=("none", "ccgan"),
         ccgan_path=str(bad),
         duration_s=1.0,
-        stretch_candidates=(1,),
+        hold_factors=(1,),
         validation_duration_s=0.5,
         robustness=False,
         plots=False,
@@ -298,7 +298,7 @@ def test_translators_trained_on_another_arm_are_refused(small_xml, tmp_path, mon
         ccgan_path=str(tmp_path / "other.ckpt"),
         seeds=(0,),
         duration_s=0.5,
-        stretch_candidates=(1,),
+        hold_factors=(1,),
         validation_duration_s=0.5,
         robustness=False,
         plots=False,
