@@ -98,10 +98,12 @@ class Arm:
 
     @functools.cached_property
     def mjx_model(self) -> mjx.Model:
-        """The device model. Sensors are off: MJX rollouts read the tip site directly."""
+        """The device model, on this process's first device (in a multi-process job the first
+        global device may belong to another process). Sensors are off: MJX rollouts read the tip
+        site directly."""
         m = copy.copy(self.mj_model)
         m.opt.disableflags |= mujoco.mjtDisableBit.mjDSBL_SENSOR
-        return mjx.put_model(m)
+        return mjx.put_model(m, device=jax.local_devices()[0])
 
     @property
     def timestep_s(self) -> float:
