@@ -42,12 +42,14 @@ class ForwardConfig:
         return ForwardModel(hidden=self.hidden, fc=self.fc)
 
 
-def make_train_forward(config: ForwardConfig, split: DomainSplit):
+def make_train_forward(config: ForwardConfig, split: DomainSplit, on_epoch=None):
     """Builds a pure `train(key) -> (variables, loss per epoch [E])` for one domain's F.
 
     Args:
       config: settings.
       split: the domain's windows (`train` [M, L, 9], `train_prev_pose` [M, L, 6]).
+      on_epoch: called on the host with each finished epoch's index (a progress bar), through
+        `jax.debug.callback`: the epochs run as one compiled scan, minutes long on a CPU.
     """
     model = config.model
     x = jnp.asarray(split.train)
@@ -78,6 +80,8 @@ def make_train_forward(config: ForwardConfig, split: DomainSplit):
                 return (optax.apply_updates(params, updates), opt_state), loss
 
             (params, opt_state), l = jax.lax.scan(step, (params, opt_state), idx)
+            if on_epoch is not None:
+                jax.debug.callback(on_epoch, e)
             return (params, opt_state), l.mean()
 
         (params, _), hist = jax.lax.scan(epoch, (params, opt_state), jnp.arange(config.epochs))
@@ -111,7 +115,12 @@ def evaluate_forward(model: ForwardModel, params, split: DomainSplit, bounds: Po
     return out
 
 
-def train_forward(config: ForwardConfig, split: DomainSplit, bounds: PoseBounds, seed: int = 0):
-    """Trains one F and evaluates it; returns (variables, loss history [E], metrics dict)."""
-    params, hist = jax.jit(make_train_forward(config, split))(jax.random.PRNGKey(seed))
+def train_forward(
+    config: ForwardConfig, split: DomainSplit, bounds: PoseBounds, seed: int = 0, on_epoch=None
+):
+    """Trains one F and evaluates it; returns (variables, loss history [E], metrics dict).
+
+    `on_epoch(epoch)` is called on the host after each epoch (see `make_train_forward`)."""
+    train = make_train_forward(config, split, on_epoch)
+    params, hist = jax.block_until_ready(jax.jit(train)(jax.random.PRNGKey(seed)))
     return params, np.asarray(hist), evaluate_forward(config.model, params, split, bounds)

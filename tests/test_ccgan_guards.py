@@ -343,7 +343,7 @@ def test_forward_training_shows_progress(tmp_path, capsys):
     fconf = forward_lib.ForwardConfig(epochs=2, batch_size=2, hidden=4, fc=4)
     report = train_lib.train_forward_models(fconf, data, tmp_path, progress=True)
     err = capsys.readouterr().err
-    assert "forward models" in err and "2/2" in err
+    assert "forward models" in err and "4/4" in err and "epoch" in err  # 2 models x 2 epochs
     assert set(report) == {"forward_s", "forward_c"} and (tmp_path / "forward_c.ckpt").exists()
 
 
