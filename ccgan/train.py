@@ -646,7 +646,7 @@ def build_parser() -> argparse.ArgumentParser:
     add_data_flags(parser)
     parser.add_argument(
         "--workdir",
-        default="results/ccgan/run",
+        default="runs/ccgan_train",
         help="output folder: state.ckpt, metrics.csv, forward_*.ckpt, translator*.ckpt",
     )
     parser.add_argument(

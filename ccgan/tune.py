@@ -353,13 +353,13 @@ def build_parser() -> argparse.ArgumentParser:
     """The options of `python -m ccgan.tune`."""
     parser = cli_parser("ccgan.tune", __doc__)
     add_data_flags(parser)
-    parser.add_argument("--storage", default="results/ccgan/tune.db", help="SQLite file")
+    parser.add_argument("--storage", default="runs/tune/tune.db", help="SQLite file")
     parser.add_argument("--study-name", default="ccgan", help="the study's name in --storage")
     parser.add_argument("--n-trials", type=int, default=10, help="trials to add in this run")
     parser.add_argument("--seed", type=int, default=0, help="sampler and training seed")
     parser.add_argument("--timeout-s", type=float, default=None, help="no new trial after this")
     parser.add_argument(
-        "--report-dir", default="results/ccgan", help="folder for tune.md, .json, _history.png"
+        "--report-dir", default="runs/tune", help="folder for tune.md, .json, _history.png"
     )
     parser.add_argument(
         "--forward-workdir", default=None, help="reuse DIR/forward_c.ckpt (a ccgan.train workdir)"
