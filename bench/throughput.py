@@ -10,7 +10,8 @@ Implementations (`--impl`, each listed one is run):
   jax   MJX-JAX: `mjx_arm.arm.rollout_program`, the function behind `Arm.rollout_fn()`.
   warp  MJX-Warp (`mjx.put_model(m, impl="warp")`, needs warp-lang==1.18.0, NVIDIA GPU or CPU):
         the same program, except that `mjx.make_data` is given the host `mujoco.MjModel` and
-        impl="warp", since it refuses an `mjx.Model` (`rollout_program_warp`). No gradients.
+        impl="warp", since it refuses an `mjx.Model` (`rollout_program(warp_host_model=...)`).
+        No gradients.
 Both take the rest state as an argument, so one compiled program serves every domain of a
 segment count (the domains differ only in model values).
 
@@ -52,9 +53,7 @@ import numpy as np
 from jax.sharding import Mesh, NamedSharding, PartitionSpec
 
 import mjx_arm  # sets the XLA CPU flag; jax reads it when its backend starts
-from mjx_arm import valve
 from mjx_arm.arm import (
-    MAX_JOINT_SPEED,
     mjx,  # imported by mjx_arm without its notice when warp is absent
     rollout_program,
 )
@@ -81,51 +80,6 @@ def programs(batch: int, periods: int, seed: int = 0) -> np.ndarray:
     return out
 
 
-def rollout_program_warp(
-    mjx_model: mjx.Model,
-    commands_bar: jnp.ndarray,
-    *,
-    mj_model: mujoco.MjModel,
-    tip_site: int,
-    actuators: tuple[int, ...],
-    n_substeps: int,
-    valve_params: valve.ValveParams,
-    rest_qpos: jnp.ndarray,
-    rest_qvel: jnp.ndarray,
-):
-    """`mjx_arm.arm.rollout_program` for an MJX-Warp model: one program [T, 3] (bar) -> poses
-    [T, 6] and ok flags [T].
-
-    The same program line for line, except the first: MJX-Warp's `make_data` needs the host
-    `mujoco.MjModel` (any domain of the arm: it only sizes and initialises the data, and qpos and
-    qvel are replaced by the rest state). The pose check against MJX-JAX and MuJoCo C guards the
-    copy against drifting from the original.
-    """
-    dtype = commands_bar.dtype
-    data = mjx.make_data(mj_model, impl="warp")
-    data = data.replace(qpos=rest_qpos.astype(dtype), qvel=rest_qvel.astype(dtype))
-    actuators = jnp.asarray(actuators)
-    timestep = mjx_model.opt.timestep
-    p0 = jnp.full((3,), valve_params.p_min_bar, dtype)
-    commands = valve.saturate(commands_bar, valve_params)
-
-    def physics_step(data, pressure):
-        data = data.replace(ctrl=data.ctrl.at[actuators].set(pressure))
-        return mjx.step(mjx_model, data), None
-
-    def control_step(carry, command):
-        data, pressure, healthy = carry
-        pressures = valve.substep_pressures(pressure, command, n_substeps, timestep, valve_params)
-        data, _ = jax.lax.scan(physics_step, data, pressures)
-        pose = jnp.concatenate([data.site_xpos[tip_site], data.site_xmat[tip_site][:, 2]])
-        finite = jnp.isfinite(data.qpos).all() & jnp.isfinite(data.qvel).all()
-        healthy = healthy & finite & (jnp.abs(data.qvel).max() < MAX_JOINT_SPEED)
-        return (data, pressures[-1], healthy), (pose, healthy)
-
-    _, (poses, ok) = jax.lax.scan(control_step, (data, p0, jnp.array(True)), commands)
-    return poses, ok
-
-
 def host_model(arm: mjx_arm.Arm) -> mujoco.MjModel:
     """The arm's model as MJX runs it: sensors off (rollouts read the tip site directly)."""
     m = copy.copy(arm.mj_model)
@@ -147,14 +101,11 @@ def batched_rollout(arm: mjx_arm.Arm, impl: str):
         n_substeps=arm.n_substeps,
         valve_params=arm.valve,
     )
-    if impl == "jax":
-        program = rollout_program
-    else:
-        program = rollout_program_warp
-        bound["mj_model"] = host_model(arm)
+    if impl == "warp":
+        bound["warp_host_model"] = host_model(arm)
 
     def one(model, commands, rest_qpos, rest_qvel):
-        return program(model, commands, rest_qpos=rest_qpos, rest_qvel=rest_qvel, **bound)
+        return rollout_program(model, commands, rest_qpos=rest_qpos, rest_qvel=rest_qvel, **bound)
 
     return jax.jit(jax.vmap(one, in_axes=(None, 0, None, None)))
 

@@ -418,6 +418,7 @@ def rollout_program(
     valve_params: valve.ValveParams,
     rest_qpos: jnp.ndarray,
     rest_qvel: jnp.ndarray,
+    warp_host_model: mujoco.MjModel | None = None,
 ):
     """One program [T, 3] (bar) -> poses [T, 6] and ok flags [T], in pure JAX.
 
@@ -431,9 +432,15 @@ def rollout_program(
       n_substeps: physics steps per control period.
       valve_params: the valve model.
       rest_qpos, rest_qvel: the state every rollout starts from.
+      warp_host_model: for an MJX-Warp `mjx_model` (`put_model(..., impl="warp")`), the host
+        `mujoco.MjModel` it came from: MJX-Warp's `make_data` refuses an `mjx.Model`. It only
+        sizes the data (any domain of the arm will do); qpos and qvel become the rest state.
     """
     dtype = commands_bar.dtype
-    data = mjx.make_data(mjx_model)
+    if warp_host_model is None:
+        data = mjx.make_data(mjx_model)
+    else:
+        data = mjx.make_data(warp_host_model, impl="warp")
     data = data.replace(qpos=rest_qpos.astype(dtype), qvel=rest_qvel.astype(dtype))
     actuators = jnp.asarray(actuators)
     timestep = mjx_model.opt.timestep
