@@ -34,6 +34,7 @@ on a GPU; `--cache-dir` keeps them for the next run, and results are written aft
 # ruff: noqa: I001  (mjx_arm is imported before jax: it sets an XLA CPU flag)
 from __future__ import annotations
 
+from ccgan.cli import cli_parser
 import mjx_arm
 
 import argparse
@@ -250,7 +251,7 @@ def markdown(result: dict) -> str:
 
 
 def parse_args(argv=None) -> argparse.Namespace:
-    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    p = cli_parser("bench.babble", __doc__)
     p.add_argument("--sizes", default="1024,4096,16384,65536", help="comma-separated batch sizes")
     p.add_argument("--seconds", type=float, default=1.0, help="simulated seconds per trajectory")
     p.add_argument(

@@ -12,7 +12,6 @@ Writes oracle{tag}.md and .json to --out.
 
 from __future__ import annotations
 
-import argparse
 import json
 from pathlib import Path
 
@@ -21,6 +20,7 @@ import numpy as np
 
 import mjx_arm  # (sets the XLA CPU flag before the first JAX computation)
 from bench import run_header
+from ccgan.cli import cli_parser
 from mjx_arm.programs import CONTROL_HZ, SHAPES
 from tracking import held
 from tracking.oracle import OracleConfig, oracle_commands
@@ -50,7 +50,7 @@ def time_oracle(arm_s, arm_c, horizon_s: float, n_programs: int, k: int, steps: 
 
 
 def main(argv=None) -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = cli_parser("bench.oracle", __doc__)
     parser.add_argument("--horizons", type=float, nargs="+", default=[1.0])
     parser.add_argument("--programs", type=int, nargs="+", default=[1])
     parser.add_argument("--k", type=int, default=10)

@@ -15,7 +15,6 @@ Writes profile_step{tag}.md and .json to --out.
 
 from __future__ import annotations
 
-import argparse
 import collections
 import dataclasses
 import glob
@@ -31,6 +30,7 @@ from bench import run_header
 from bench.train import babbling_data, forward_c_params, synthetic_data, time_epochs
 from ccgan import config as config_lib
 from ccgan import train as train_lib
+from ccgan.cli import cli_parser
 from ccgan.models import ForwardModel
 
 #: Named scopes of `ccgan.train`'s train step, most specific first.
@@ -169,7 +169,7 @@ def profile_impl(config, data, fc_params, fwd, k: int, epochs: int) -> dict:
 
 
 def main(argv=None) -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = cli_parser("bench.profile_step", __doc__)
     parser.add_argument("--out", default="bench/results")
     parser.add_argument("--data", default=None, help="babbling folder (default: synthetic)")
     parser.add_argument("--forward-c", default=None, help="trained F_c checkpoint")

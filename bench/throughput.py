@@ -35,7 +35,6 @@ what it measured.
 
 from __future__ import annotations
 
-import argparse
 import copy
 import dataclasses
 import json
@@ -53,6 +52,7 @@ import numpy as np
 from jax.sharding import Mesh, NamedSharding, PartitionSpec
 
 import mjx_arm  # sets the XLA CPU flag; jax reads it when its backend starts
+from ccgan.cli import cli_parser
 from mjx_arm.arm import (
     mjx,  # imported by mjx_arm without its notice when warp is absent
     rollout_program,
@@ -323,7 +323,7 @@ def parse_overrides(items: list[str]) -> dict:
 
 
 def main(argv: list[str] | None = None) -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = cli_parser("bench.throughput", __doc__)
     parser.add_argument("--impl", nargs="+", choices=IMPLS, default=["jax"])
     parser.add_argument("--domains", nargs="+", default=["source", "constrained"])
     parser.add_argument("--segments", type=int, nargs="+", default=None, help="n_segments each")

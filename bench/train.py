@@ -13,7 +13,6 @@ Writes train.md and train.json (train_paper.* with --paper) to --out.
 
 from __future__ import annotations
 
-import argparse
 import dataclasses
 import json
 import time
@@ -28,6 +27,7 @@ from ccgan import checkpoint
 from ccgan import config as config_lib
 from ccgan import data as data_lib
 from ccgan import train as train_lib
+from ccgan.cli import cli_parser
 from ccgan.models import ForwardModel
 
 #: The paper's training time for one CCGAN-GP (12 h 32 min).
@@ -171,7 +171,7 @@ def _hms(s: float) -> str:
 
 
 def main(argv=None) -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = cli_parser("bench.train", __doc__)
     parser.add_argument("--out", default="bench/results")
     parser.add_argument("--paper", action="store_true", help="paper scale, 550 epochs, end to end")
     parser.add_argument("--n-traj", type=int, default=10, help="trajectories per domain")

@@ -11,7 +11,6 @@ averaged over seeds.
 
 from __future__ import annotations
 
-import argparse
 import json
 from pathlib import Path
 
@@ -20,12 +19,13 @@ import numpy as np
 import mjx_arm
 from bench import run_header
 from ccgan import load_translator
+from ccgan.cli import cli_parser
 from mjx_arm.programs import CONTROL_HZ, SHAPES
 from tracking import held, metrics
 
 
 def main(argv=None) -> None:
-    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p = cli_parser("studies.finetune_window", __doc__)
     p.add_argument("folders", nargs="+", help="folders with translator_seed{s}.ckpt")
     p.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])
     p.add_argument("--window", type=float, default=2.0, help="seconds from rest")

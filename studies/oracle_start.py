@@ -11,7 +11,6 @@ the best loss and the X_err (cm) of the returned commands in MuJoCo C. The mpc s
 
 from __future__ import annotations
 
-import argparse
 import json
 from pathlib import Path
 
@@ -19,13 +18,14 @@ import numpy as np
 
 import mjx_arm
 from bench import run_header
+from ccgan.cli import cli_parser
 from mjx_arm.programs import CONTROL_HZ, SHAPES
 from tracking import held, metrics, mpc
 from tracking.oracle import OracleConfig, oracle_commands
 
 
 def main(argv=None) -> None:
-    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p = cli_parser("studies.oracle_start", __doc__)
     p.add_argument("--shapes", nargs="+", default=["circle"], choices=list(SHAPES))
     p.add_argument("--horizon", type=float, default=2.0, help="seconds optimised")
     p.add_argument("--steps", type=int, default=10)

@@ -11,7 +11,6 @@ thread, simulated seconds per wall second.
 
 from __future__ import annotations
 
-import argparse
 import dataclasses
 import json
 import sys
@@ -23,6 +22,7 @@ import numpy as np
 
 import mjx_arm
 from bench.throughput import programs
+from ccgan.cli import cli_parser
 from mjx_arm import ArmParams, generate_xml
 from mjx_arm.machine import cpu_model
 
@@ -45,7 +45,7 @@ def rms_mm(a: np.ndarray, b: np.ndarray) -> float:
 
 
 def main(argv: list[str] | None = None) -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = cli_parser("studies.timestep", __doc__)
     parser.add_argument("--segments", type=int, nargs="+", default=[5, 10, 20])
     parser.add_argument("--timesteps", type=float, nargs="+", default=[0.001, 0.002, 0.004, 0.005])
     parser.add_argument("--trajectories", type=int, default=4)

@@ -13,7 +13,6 @@ Writes window.md and window.json to --out.
 
 from __future__ import annotations
 
-import argparse
 import dataclasses
 import json
 import time
@@ -23,6 +22,7 @@ import jax
 
 from ccgan import data as data_lib
 from ccgan import forward as forward_lib
+from ccgan.cli import cli_parser
 from ccgan.config import TrainConfig
 from ccgan.train import load_npz
 from ccgan.tune import ForwardCache, make_validation_run, validation_error_cm
@@ -32,7 +32,7 @@ DATA = "data/babble"
 
 
 def main(argv=None) -> dict:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = cli_parser("studies.window", __doc__)
     parser.add_argument("--lengths", type=int, nargs="+", default=[5, 10, 20])
     parser.add_argument("--epochs", type=int, default=10)
     parser.add_argument("--forward-workdir", default="results/ccgan")
