@@ -19,8 +19,8 @@ Stiffness, gain and drag can trade off almost freely in an overdamped arm (scali
 changes nothing but the weight of inertia), and the chain's statics already follow from the
 section with no fitting (chamber couples and springs are exact per joint), so a strong prior
 holds stiffness and gain at their physical values and the data fit the two media. With a weak
-prior the fit lowers stiffness and gain by 15% with a 2.4% different ratio, which trades the
-statics and the constrained medium's slow settling for a little babbling error.
+prior the fit moves stiffness and gain apart, which trades the statics and the constrained
+medium's slow settling for a little babbling error.
 
 The joints carry no damping: the rod has no material damping, only the medium's.
 

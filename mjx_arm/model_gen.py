@@ -95,9 +95,9 @@ class ArmParams:
     """Alternate the order of each segment's two bending hinges, x then y on even segments, y
     then x on odd ones [choice: two hinges in a row turn by Rx(a) Ry(b) = exp(a x + b y + ab/2 z
     + ...), a spurious twist of ab/2 per joint that accumulates along the arm and turns the
-    bending plane of chambers 1 and 2 (70 mrad at 3.5 bar on 10 segments); reversing the order
-    flips its sign, so neighbours cancel it. A third hinge (x/2, y, x/2) cancels it in each
-    segment too, but made MJX's compile on the CPU take minutes]. None: on for the I-Support
+    bending plane of chambers 1 and 2 (`tests/test_model.py`); reversing the order flips its
+    sign, so neighbours cancel it. A third hinge (x/2, y, x/2) cancels it in each segment too,
+    but adds ten joints and slowed MJX's compile on the CPU]. None: on for the I-Support
     section, off for the solid one, whose frozen model keeps x then y throughout.
     """
     euler_implicit_damping: bool = False
