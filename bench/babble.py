@@ -268,7 +268,9 @@ def parse_args(argv=None) -> argparse.Namespace:
     p.add_argument("--skip-mjx-paper", action="store_true", help="paper preset with C only")
     p.add_argument("--cache-dir", help="JAX persistent compilation cache folder")
     p.add_argument("--quick", action="store_true", help="CPU smoke run: tiny sizes and model")
-    p.add_argument("--out", default="bench/results")
+    p.add_argument(
+        "--out", default="runs/bench", help="output folder (committed results: bench/results)"
+    )
     args = p.parse_args(argv)
     if args.quick:
         args.sizes = "2,8" if args.sizes == p.get_default("sizes") else args.sizes

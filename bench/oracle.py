@@ -55,7 +55,9 @@ def main(argv=None) -> None:
     parser.add_argument("--programs", type=int, nargs="+", default=[1])
     parser.add_argument("--k", type=int, default=10)
     parser.add_argument("--steps", type=int, default=3)
-    parser.add_argument("--out", default="bench/results")
+    parser.add_argument(
+        "--out", default="runs/bench", help="output folder (committed results: bench/results)"
+    )
     parser.add_argument("--tag", default="")
     args = parser.parse_args(argv)
     if args.steps < 2:

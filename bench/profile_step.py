@@ -170,7 +170,9 @@ def profile_impl(config, data, fc_params, fwd, k: int, epochs: int) -> dict:
 
 def main(argv=None) -> None:
     parser = cli_parser("bench.profile_step", __doc__)
-    parser.add_argument("--out", default="bench/results")
+    parser.add_argument(
+        "--out", default="runs/bench", help="output folder (committed results: bench/results)"
+    )
     parser.add_argument("--data", default=None, help="babbling folder (default: synthetic)")
     parser.add_argument("--forward-c", default=None, help="trained F_c checkpoint")
     parser.add_argument("--k", type=int, default=10)

@@ -344,7 +344,12 @@ def main(argv: list[str] | None = None) -> None:
         default="ArmParams() (models/softarm.xml at its 10 segments)",
         help="name of the model variant",
     )
-    parser.add_argument("--out", type=Path, default=Path("bench/results"))
+    parser.add_argument(
+        "--out",
+        type=Path,
+        default=Path("runs/bench"),
+        help="output folder (committed results: bench/results)",
+    )
     parser.add_argument("--append", action="store_true", help="keep the results in --out")
     parser.add_argument("--report-only", action="store_true", help="only rewrite the tables")
     parser.add_argument("--merge", type=Path, nargs="*", default=[], help="more result json")

@@ -172,7 +172,9 @@ def _hms(s: float) -> str:
 
 def main(argv=None) -> None:
     parser = cli_parser("bench.train", __doc__)
-    parser.add_argument("--out", default="bench/results")
+    parser.add_argument(
+        "--out", default="runs/bench", help="output folder (committed results: bench/results)"
+    )
     parser.add_argument("--paper", action="store_true", help="paper scale, 550 epochs, end to end")
     parser.add_argument("--n-traj", type=int, default=10, help="trajectories per domain")
     parser.add_argument("--samples", type=int, default=600, help="control steps per trajectory")

@@ -50,7 +50,12 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--timesteps", type=float, nargs="+", default=[0.001, 0.002, 0.004, 0.005])
     parser.add_argument("--trajectories", type=int, default=4)
     parser.add_argument("--seconds", type=float, default=30.0)
-    parser.add_argument("--out", type=Path, default=Path("studies/results/cpu"))
+    parser.add_argument(
+        "--out",
+        type=Path,
+        default=Path("runs/studies"),
+        help="output folder (committed results: studies/results/cpu)",
+    )
     args = parser.parse_args(argv)
     commands = programs(args.trajectories, int(round(args.seconds * 10)), seed=7)
 

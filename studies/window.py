@@ -36,7 +36,11 @@ def main(argv=None) -> dict:
     parser.add_argument("--lengths", type=int, nargs="+", default=[5, 10, 20])
     parser.add_argument("--epochs", type=int, default=10)
     parser.add_argument("--forward-workdir", default="results/ccgan")
-    parser.add_argument("--out", default="studies/results/cpu")
+    parser.add_argument(
+        "--out",
+        default="runs/studies",
+        help="output folder (committed results: studies/results/cpu)",
+    )
     args = parser.parse_args(argv)
 
     ps, xs, bounds = load_npz(f"{DATA}/source_train.npz", f"{DATA}/source_val.npz")
