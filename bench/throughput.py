@@ -80,10 +80,19 @@ def programs(batch: int, periods: int, seed: int = 0) -> np.ndarray:
     return out
 
 
+WARP_DENSE_NV_MAX = 60  # MuJoCo Warp refuses a dense Jacobian above this many dofs
+
+
 def host_model(arm: mjx_arm.Arm) -> mujoco.MjModel:
-    """The arm's model as MJX runs it: sensors off (rollouts read the tip site directly)."""
+    """The arm's model as MJX-Warp runs it: sensors off (rollouts read the tip site directly).
+
+    Above 60 dofs MuJoCo Warp accepts only the sparse Jacobian, so longer chains switch to it
+    (the dynamics are the same; only the linear algebra's layout changes).
+    """
     m = copy.copy(arm.mj_model)
     m.opt.disableflags |= mujoco.mjtDisableBit.mjDSBL_SENSOR
+    if m.nv > WARP_DENSE_NV_MAX:
+        m.opt.jacobian = mujoco.mjtJacobian.mjJAC_SPARSE
     return m
 
 
@@ -194,9 +203,6 @@ class Results:
         self.machine, self.rows, self.checks, self.poses, self.commands = machine, [], [], {}, []
         if append:
             self.merge(self.json_path)
-            if self.poses_path.exists():
-                with np.load(self.poses_path) as f:
-                    self.poses.update({k: f[k] for k in f.files})
         if command:
             self.commands.append(command)
 
@@ -210,6 +216,21 @@ class Results:
             self.add_check(c, write=False)
         self.commands = old.get("commands", []) + self.commands
         self.machine = {**old.get("machine", {}), **self.machine}
+        poses_path = path.with_name(path.stem + "_check_poses.npz")
+        if poses_path.exists():
+            with np.load(poses_path) as f:
+                self.poses.update({k: f[k] for k in f.files if k not in self.poses})
+        self.check_warp_against_jax()
+
+    def check_warp_against_jax(self) -> None:
+        """Fills a Warp check's `vs_jax` from MJX-JAX poses of the same programs, from any run."""
+        for c in self.checks:
+            if c["impl"] != "warp" or c.get("vs_jax"):
+                continue
+            warp = self.poses.get(f"seg{c['segments']}_{c['domain']}_warp")
+            jax_poses = self.poses.get(f"seg{c['segments']}_{c['domain']}_jax")
+            if warp is not None and jax_poses is not None and warp.shape == jax_poses.shape:
+                c["vs_jax"] = pose_diff(warp, jax_poses)
 
     def add_row(self, row: dict, write: bool = True) -> None:
         self.rows = [r for r in self.rows if row_key(r) != row_key(row)] + [row]

@@ -35,9 +35,12 @@
 # here: python -m bench.throughput --report-only --segments 10 20 30 --out DIR --merge OTHER.json
 # BENCH_TIMEOUT_S (default 540) bounds the benchmark so that the results still reach $OUT; the
 # tables are rewritten after every row, so a run stopped part-way returns what it measured, and a
-# later call (--segments of what is missing) adds the rest to the same table. Untried on a GPU as
-# of this commit (no machine was lent): MJX-JAX compile times at 20 and 30 segments are unknown
-# (30-50 s per program at 10), so call 1 may need splitting, e.g. --segments 10 20, then 30.
+# later call (--segments of what is missing) adds the rest to the same table.
+# Run on one H100 (2026-11-23; bench/results/h100/throughput_segments.md): call 1 with all three
+# segment counts needs more than the 540 s bound (MJX-JAX compiles 47-148 s per program), so it
+# stopped before 30 segments at 32,768; the machine was then lost, so the warp pieces went to a
+# fresh machine and .whl followed them in a call of its own (.whl and a piece do not fit one call).
+# Split call 1 as --segments 10 20, then --segments 30. The Warp call needs ~10 min for 20 and 30.
 set -uo pipefail
 
 TMP=${DEVICE_TMP:-/tmp} # overridable only to rehearse the calls on another machine

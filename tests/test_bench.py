@@ -1,0 +1,57 @@
+"""bench.throughput's result merging: runs made on different machines become one table."""
+
+import json
+
+import numpy as np
+
+from bench import throughput
+
+
+def _run(folder, impl, poses):
+    """Writes one run's json and check poses as `bench.throughput` does; returns the json path."""
+    folder.mkdir()
+    row = {
+        "segments": 10,
+        "nv": 40,
+        "domain": "source",
+        "impl": impl,
+        "batch": 8,
+        "mjx_compile_s": 1.0,
+        "compile_shared": False,
+        "mjx_first_call_s": 1.0,
+        "mjx_wall_s": 0.5,
+        "mjx_sim_s_per_s": {"jax": 100.0, "warp": 50.0}[impl],
+        "mjx_steps_per_s": 1000,
+        "c_sim_s_per_s": 10.0,
+        "mjx_over_c": 10.0,
+    }
+    check = {
+        "segments": 10,
+        "domain": "source",
+        "impl": impl,
+        "programs": 2,
+        "vs_c": {"pos_mm": 0.0, "d3": 0.0},
+    }
+    path = folder / "throughput_segments.json"
+    path.write_text(json.dumps({"machine": {}, "commands": [], "rows": [row], "checks": [check]}))
+    np.savez(folder / "throughput_segments_check_poses.npz", **{f"seg10_source_{impl}": poses})
+    return path
+
+
+def test_merged_runs_check_warp_against_jax_poses_of_the_other_run(tmp_path):
+    jax_poses = np.zeros((2, 3, 6))
+    warp_poses = jax_poses.copy()
+    warp_poses[1, 2, 0] = 0.002  # 2 mm at one control period
+    jax_json = _run(tmp_path / "a", "jax", jax_poses)
+    warp_json = _run(tmp_path / "b", "warp", warp_poses)
+
+    results = throughput.Results(tmp_path / "merged", "_segments", {}, "", append=True)
+    results.merge(warp_json)
+    results.merge(jax_json)
+    results.write()
+
+    warp_check = next(c for c in results.checks if c["impl"] == "warp")
+    assert warp_check["vs_jax"]["pos_mm"] == 2.0
+    table = results.md_path.read_text()
+    warp_row = next(line for line in table.splitlines() if "| 40 | source | MJX-Warp |" in line)
+    assert warp_row.endswith("| 0.50 |")  # Warp / JAX throughput across the two runs
