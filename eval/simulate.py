@@ -314,6 +314,7 @@ def score(plan: Plan, commands_of: dict, poses_of: dict, oracle_out: dict, log) 
     errors}}, and the trajectories the plots and videos draw, {shape: {"pressures_s",
     "target", "poses", "commands", "k"}} (the first seed's of each method)."""
     fc_model, rest_c = forward_model(plan.translators), plan.arm_c.rest_pose()
+    rest_s = plan.arm_s.rest_pose()
 
     def fc(cmd, k, target):
         return _fc_errors(fc_model, rest_c, cmd, k, target)
@@ -321,6 +322,7 @@ def score(plan: Plan, commands_of: dict, poses_of: dict, oracle_out: dict, log) 
     table, trajectories = {}, {}
     for shape in plan.cfg.shapes:
         p_s, target = plan.sources[shape], plan.targets[shape]
+        excursion_cm = metrics.tip_excursion_cm(target, rest_s)
         traj = {"pressures_s": p_s, "target": target, "poses": {}, "commands": {}, "k": {}}
         rows, oracle_summary = {}, None
         if shape in oracle_out:
@@ -340,6 +342,9 @@ def score(plan: Plan, commands_of: dict, poses_of: dict, oracle_out: dict, log) 
             row.update(k=k, n_seeds=len(poses_all))
             row.update(fc(cmd, k, target))
             rows[method] = row
+        for row in rows.values():
+            row["target_excursion_cm"] = excursion_cm
+            row["x_err_pct_of_excursion"] = 100.0 * row["x_err_cm_mean"] / excursion_cm
         table[shape], trajectories[shape] = rows, traj
         errors = (
             f"{m} {r['x_err_cm_mean']:.3f} cm / {r['phi_err_rad_mean']:.3f} rad"

@@ -130,3 +130,17 @@ def repetition_spread_cm(poses_reps: np.ndarray) -> dict[str, float]:
         "spread_cm_mean": float(np.sqrt((dev**2).mean(axis=0)).mean()),
         "spread_cm_max": float(dev.max()),
     }
+
+
+def tip_excursion_cm(poses_target: np.ndarray, rest_pose: np.ndarray) -> float:
+    """How far a target path takes the tip: the RMS distance (cm) of its tip from the rest tip.
+
+    The scale an X_err is read against: the same error is small on a path that sweeps
+    centimetres and large on one that hardly leaves rest.
+
+    Args:
+      poses_target: [T, 6] target poses (tip position m, then d3).
+      rest_pose: [6] the tip pose at rest.
+    """
+    offset = np.asarray(poses_target)[..., :3] - np.asarray(rest_pose)[:3]
+    return float(np.sqrt(np.mean(np.sum(offset**2, axis=-1)))) * M_TO_CM

@@ -1,0 +1,114 @@
+"""The whole chain, from babbling to the table beside the paper's Table I, as one command.
+
+    python -m experiments.paper --out DIR                 # every stage not yet done, in order
+    python -m experiments.paper --out DIR --list          # each stage's state and command
+    python -m experiments.paper --out DIR --stage ccgan   # run or resume one stage
+    python -m experiments.paper --out DIR --deadline-s 540   # stop cleanly; rerun to continue
+
+The stages and every setting are in a committed config (`experiments/paper.json`; the tiny
+`experiments/quick.json` runs the same chain on a CPU in minutes). The schedule is fixed there
+before any shape is scored: iterates are picked on held-out programs inside each command, and
+the five shapes appear only in the final tables. A finished stage is skipped while its outputs
+match their inputs (`experiments.stages`); when all are done, DIR/paper.md reports the wall time
+of each stage and the tables beside the paper's.
+"""
+
+from __future__ import annotations
+
+import argparse
+import signal
+import sys
+import time
+from pathlib import Path
+
+from experiments import report
+from experiments.stages import Chain, DeadlineReached, StageError, load_config, run_stage
+
+REPO = Path(__file__).resolve().parent.parent
+DEFAULT_CONFIG = REPO / "experiments" / "paper.json"
+EXIT_STOPPED = 3  # the deadline came first: rerun the same command to continue
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="python -m experiments.paper",
+        description=__doc__.strip().splitlines()[0],
+        formatter_class=argparse.ArgumentDefaultsHelpFormatter,
+    )
+    parser.add_argument("--out", required=True, type=Path, help="run folder (one per config)")
+    parser.add_argument("--config", type=Path, default=DEFAULT_CONFIG, help="the chain's stages")
+    parser.add_argument(
+        "--stage", nargs="+", default=None, help="run only these stages (their inputs must be done)"
+    )
+    parser.add_argument(
+        "--redo",
+        nargs="+",
+        default=[],
+        help="rerun these stages although done or made from other inputs (old folders are kept)",
+    )
+    parser.add_argument("--list", action="store_true", help="show the stages' state; run nothing")
+    parser.add_argument(
+        "--deadline-s",
+        type=float,
+        default=None,
+        help="stop the running stage after this many seconds of the whole run (exit status 3;"
+        " its folder stays and the same command continues it)",
+    )
+    return parser
+
+
+def list_stages(chain: Chain) -> None:
+    for name in chain.stages:
+        try:
+            status = chain.status(name)
+        except StageError as err:
+            status = f"broken ({err})"
+        if status in ("todo", "partial"):
+            waiting = [n for n in chain.stages[name].inputs if chain.manifest(n) is None]
+            if waiting:
+                status += f" (waits for {', '.join(waiting)})"
+        print(f"{name:14s} {status}")
+        print(f"{'':14s} {chain.stages[name].about}")
+
+
+def main(argv=None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    try:
+        config, stages = load_config(args.config)
+    except StageError as err:
+        parser.error(str(err))
+    chain = Chain(stages, args.out, REPO)
+    unknown = [n for n in (args.stage or []) + args.redo if n not in chain.stages]
+    if unknown:
+        parser.error(f"unknown stage(s) {unknown}; the config has {list(chain.stages)}")
+    if args.deadline_s is not None and args.deadline_s <= 0:
+        parser.error("--deadline-s must be positive")
+    if args.list:
+        list_stages(chain)
+        return 0
+    signal.signal(signal.SIGTERM, lambda *_: sys.exit(128 + signal.SIGTERM))
+    args.out.mkdir(parents=True, exist_ok=True)
+    start = time.monotonic()
+    selected = args.stage or list(chain.stages)
+    for i, name in enumerate(selected):
+        left = None if args.deadline_s is None else args.deadline_s - (time.monotonic() - start)
+        print(f"== stage {i + 1}/{len(selected)}: {name}", flush=True)
+        try:
+            if left is not None and left <= 0:
+                raise DeadlineReached(f"the deadline came before stage {name}")
+            run_stage(chain, name, redo=name in args.redo, deadline_s=left)
+        except DeadlineReached as err:
+            print(f"stopped: {err}. Rerun the same command to continue.", file=sys.stderr)
+            return EXIT_STOPPED
+        except StageError as err:
+            print(f"error: {err}", file=sys.stderr)
+            return 1
+    if all(chain.manifest(n) is not None for n in chain.stages):
+        path = report.write(chain, config, args.config)
+        print(f"report: {path}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

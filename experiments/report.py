@@ -1,0 +1,166 @@
+"""paper.md: what each stage of a chain made, its wall time, and the tables beside the paper's.
+
+Read only from the finished stages' manifests and the evaluation stages' shapes.json, so the
+report can be rewritten at any time without running anything.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+from eval.report import METHOD_NAMES, PAPER_TABLE_I
+from experiments.stages import Chain, digest
+
+#: The stages whose shapes.json the report reads: the D_c medium, and the aged arm.
+TABLE_STAGE, AGED_TABLE_STAGE = "table", "table_aged"
+#: Translators that need no simulator when they translate.
+TRANSLATORS = ("ccgan", "ccgan_sim", "wcgan")
+
+
+def _shapes(chain: Chain, name: str) -> dict | None:
+    path = chain.folder(name) / "shapes.json"
+    return json.loads(path.read_text()) if path.exists() else None
+
+
+def _hms(seconds: float) -> str:
+    minutes, s = divmod(int(round(seconds)), 60)
+    return f"{minutes // 60} h {minutes % 60:02d} min {s:02d} s"
+
+
+def stage_lines(chain: Chain) -> list[str]:
+    """The stages: what each made, where it ran, its wall time over its attempts, its command."""
+    lines = [
+        "| stage | what | wall time | attempts | machine |",
+        "|---|---|---|---|---|",
+    ]
+    total = 0.0
+    for name in chain.stages:
+        m = chain.manifest(name)
+        total += m["wall_s"]
+        lines.append(
+            f"| {name} | {m['about']} | {_hms(m['wall_s'])} | {len(m['attempts'])}"
+            f" | {m['machine']} |"
+        )
+    lines += ["", f"Total: {_hms(total)}.", "", "Commands, in order:", ""]
+    lines += [f"- `{chain.manifest(n)['command']}`" for n in chain.stages]
+    return lines
+
+
+def paper_lines(results: dict) -> list[str]:
+    """The paper's Table I beside ours: through F_c as the paper scored, and in the simulator."""
+    table = results["table"]
+    ours = [m for m in ("ccgan", "wcgan", "ccgan_sim") if m in results["methods_run"]]
+    head = ["shape", "paper CCGAN-GP", "paper WCGAN-GP"]
+    head += [f"{METHOD_NAMES[m]}, through F_c" for m in ours if m != "ccgan_sim"]
+    head += [f"{METHOD_NAMES[m]}, simulator" for m in ours]
+    lines = [
+        "X_err (cm) / phi_err (rad), means. The paper scored its Table I through its forward"
+        " model F_c; 'through F_c' scores our commands the same way with our F_c, 'simulator'"
+        " in the true D_c simulator (what every target below is judged on).",
+        "",
+        "| " + " | ".join(head) + " |",
+        "|" + "---|" * len(head),
+    ]
+    for shape, rows in table.items():
+        paper = PAPER_TABLE_I.get(shape, {})
+        cells = [
+            f"{paper[m][0]:.2f} / {paper[m][1]:.3f}" if m in paper else "-"
+            for m in ("ccgan", "wcgan")
+        ]
+        for m in ours:
+            if m != "ccgan_sim":
+                r = rows[m]
+                cells.append(f"{r['fc_x_err_cm_mean']:.2f} / {r['fc_phi_err_rad_mean']:.3f}")
+        for m in ours:
+            r = rows[m]
+            cells.append(f"{r['x_err_cm_mean']:.2f} / {r['phi_err_rad_mean']:.3f}")
+        lines.append(f"| {shape} | " + " | ".join(cells) + " |")
+    return lines
+
+
+def _count(shapes: list[str], ok) -> str:
+    passed = [s for s in shapes if ok(s)]
+    verdict = "met" if len(passed) == len(shapes) else "not met"
+    return f"{len(passed)} of {len(shapes)} shapes: {verdict}"
+
+
+def target_lines(results: dict, aged: dict | None) -> list[str]:
+    """Each target of the chain, checked shape by shape in the simulator."""
+    table, methods = results["table"], results["methods_run"]
+    shapes = list(table)
+
+    def x(m, s, t=table):
+        return t[s][m]["x_err_cm_mean"]
+
+    lines = []
+    if {"ccgan", "wcgan", "none"} <= set(methods):
+        lines.append(
+            "- CCGAN-GP at most the paper's CCGAN-GP error: "
+            + _count(shapes, lambda s: x("ccgan", s) <= PAPER_TABLE_I[s]["ccgan"][0])
+        )
+        lines.append(
+            "- CCGAN-GP below WCGAN-GP and below untranslated: "
+            + _count(shapes, lambda s: x("ccgan", s) < min(x("wcgan", s), x("none", s)))
+        )
+    best = min(
+        (m for m in TRANSLATORS if m in methods),
+        key=lambda m: sum(x(m, s) for s in shapes),
+        default=None,
+    )
+    if best is not None:
+        lines.append(
+            f"- Best translator ({METHOD_NAMES[best]}, lowest X_err summed over the shapes) at"
+            " most a third of the paper's error: "
+            + _count(shapes, lambda s: x(best, s) <= PAPER_TABLE_I[s]["ccgan"][0] / 3)
+        )
+        if "oracle" in methods:
+            lines.append(
+                f"- {METHOD_NAMES[best]} within 1.5x the oracle over its window: "
+                + _count(shapes, lambda s: table[s][best]["x_ratio_to_oracle"] <= 1.5)
+            )
+        if "stretch" in methods:
+            ratios = [x(best, s) / x("stretch", s) for s in shapes]
+            lines.append(
+                f"- Stretch only beside {METHOD_NAMES[best]}: X_err ratio translator / stretch"
+                f" {min(ratios):.2f}-{max(ratios):.2f}"
+                f" (the translator is lower on {sum(r < 1 for r in ratios)} of {len(shapes)})."
+            )
+    if aged is not None:
+        aged_methods = [m for m in TRANSLATORS if m in aged["methods_run"]]
+        if aged_methods and "stretch" in aged["methods_run"]:
+            t = aged["table"]
+            best_aged = min(aged_methods, key=lambda m: sum(x(m, s, t) for s in t))
+            lines.append(
+                f"- Aged arm: {METHOD_NAMES[best_aged]} below stretch only: "
+                + _count(list(t), lambda s: x(best_aged, s, t) < x("stretch", s, t))
+            )
+    return lines
+
+
+def write(chain: Chain, config: dict, config_path: Path) -> Path:
+    """Writes chain.out/paper.md from the finished stages; returns its path."""
+    results = _shapes(chain, TABLE_STAGE)
+    aged = _shapes(chain, AGED_TABLE_STAGE)
+    lines = [
+        "# The chain on the soft arm, beside the paper's Table I",
+        "",
+        f"Config: `{config_path.name}` (digest {digest(config)}); {config.get('about', '')}",
+        "",
+        "The schedule was fixed in the config before any shape was scored. Every iterate was"
+        " picked on held-out programs inside its command; the five shapes were used only for the"
+        " tables below.",
+        "",
+        "## Stages",
+        "",
+        *stage_lines(chain),
+    ]
+    if results is not None:
+        lines += ["", "## Beside the paper", "", *paper_lines(results)]
+        lines += ["", "## Targets (true D_c simulator)", "", *target_lines(results, aged)]
+        lines += ["", f"Full tables: `{TABLE_STAGE}/shapes.md`"]
+        if aged is not None:
+            lines[-1] += f", the aged arm's `{AGED_TABLE_STAGE}/shapes.md`."
+    path = chain.out / "paper.md"
+    path.write_text("\n".join(lines) + "\n")
+    return path

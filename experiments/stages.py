@@ -1,0 +1,357 @@
+"""A chain of commands run as stages: each is skipped when its outputs match their inputs.
+
+A stage is one command of the project (`python -m mjx_arm.babble ...`, `python -m ccgan.train
+...`) that writes one folder. Its key is a hash of the command, of the files it names outside the
+run (the arm's MJCF) and of the outputs of the stages it reads. A finished stage's folder holds
+`stage.json`: the key, the sha256 of every file it wrote, the command and its wall time. A later
+run skips the stage when the key is the same and every file still has its hash; it refuses a
+folder made from other inputs (a changed config, a rerun upstream stage) unless told to redo it,
+and then keeps the old folder beside the new one.
+
+A stage runs in `<stage>.partial/` and is renamed into place only when its command succeeds, so
+a folder without `.partial` is always whole. A command that stops part-way (a device call's time
+limit) leaves `.partial/` with the key it was started with; the next run with the same key
+continues in it (`ccgan.train` resumes from its checkpoints), and one with another key refuses
+it. Wall times add up over the attempts.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import datetime
+import functools
+import hashlib
+import json
+import os
+import re
+import shlex
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+from mjx_arm.machine import cpu_model
+
+MANIFEST = "stage.json"
+PARTIAL_SUFFIX = ".partial"
+ATTEMPTS_SUFFIX = ".attempts.json"
+PLACEHOLDER = re.compile(r"\{([a-z_]+)(?::([a-z0-9_]+))?\}")
+
+
+STOP_GRACE_S = 30.0  # a stopped command's time to finish writing a checkpoint
+
+
+class StageError(RuntimeError):
+    """A stage cannot run or be trusted: a failed command, missing inputs, a mismatched folder."""
+
+
+class DeadlineReached(RuntimeError):
+    """The run's time ran out; the stage's partial folder stays for the next run."""
+
+
+@dataclasses.dataclass(frozen=True)
+class Stage:
+    """One command of the chain.
+
+    Attributes:
+      name: folder name of its outputs under the run folder.
+      module: the module run as `python -m module`.
+      args: its arguments. `{dir}` is the stage's own (partial) folder, `{stage:NAME}` the
+        finished folder of stage NAME (which makes NAME an input), `{file:PATH}` a file of the
+        repository whose hash joins the key (the arm's MJCF).
+      about: one line for the report: what the stage makes.
+    """
+
+    name: str
+    module: str
+    args: tuple[str, ...]
+    about: str = ""
+
+    @property
+    def inputs(self) -> tuple[str, ...]:
+        """Names of the stages whose outputs this one reads, in order of first mention."""
+        names = []
+        for arg in self.args:
+            for kind, value in PLACEHOLDER.findall(arg):
+                if kind == "stage" and value not in names:
+                    names.append(value)
+        return tuple(names)
+
+    def files(self) -> tuple[str, ...]:
+        """Repository files named by `{file:PATH}`."""
+        out = []
+        for arg in self.args:
+            out += re.findall(r"\{file:([^}]+)\}", arg)
+        return tuple(out)
+
+
+def load_config(path: str | os.PathLike) -> tuple[dict, list[Stage]]:
+    """Reads a chain's config: a JSON object with "stages", a list of {name, module, args, about}
+    (args: one shell-quoted string, or a list).
+
+    Raises:
+      StageError: a malformed config, a repeated stage name, or a stage that reads a stage
+        defined after it (or not at all).
+    """
+    path = Path(path)
+    try:
+        config = json.loads(path.read_text())
+    except (OSError, json.JSONDecodeError) as err:
+        raise StageError(f"cannot read the config {path}: {err}") from err
+    stages, seen = [], set()
+    for i, raw in enumerate(config.get("stages", [])):
+        try:
+            stage = Stage(
+                name=raw["name"],
+                module=raw["module"],
+                args=tuple(
+                    shlex.split(raw["args"])
+                    if isinstance(raw["args"], str)
+                    else [str(a) for a in raw["args"]]
+                ),
+                about=raw.get("about", ""),
+            )
+        except (KeyError, TypeError) as err:
+            raise StageError(f"{path}: stage {i} lacks {err} (name, module, args)") from err
+        if not re.fullmatch(r"[a-z][a-z0-9_]*", stage.name) or stage.name in seen:
+            raise StageError(f"{path}: stage name {stage.name!r} is not a new lower-case name")
+        missing = [n for n in stage.inputs if n not in seen]
+        if missing:
+            raise StageError(f"{path}: stage {stage.name} reads {missing}, not defined before it")
+        seen.add(stage.name)
+        stages.append(stage)
+    if not stages:
+        raise StageError(f"{path}: no stages")
+    return config, stages
+
+
+def sha256_file(path: Path) -> str:
+    digest = hashlib.sha256()
+    with open(path, "rb") as f:
+        for block in iter(lambda: f.read(1 << 20), b""):
+            digest.update(block)
+    return digest.hexdigest()
+
+
+def file_hashes(folder: Path) -> dict[str, str]:
+    """{relative path: sha256} of every file under folder but the manifest."""
+    return {
+        str(p.relative_to(folder)): sha256_file(p)
+        for p in sorted(folder.rglob("*"))
+        if p.is_file() and p.name != MANIFEST
+    }
+
+
+def digest(obj) -> str:
+    return hashlib.sha256(json.dumps(obj, sort_keys=True).encode()).hexdigest()[:16]
+
+
+class Chain:
+    """The stages of one run folder: their state, keys and commands.
+
+    Args:
+      stages: in order; each reads only stages before it.
+      out: the run folder.
+      repo: the folder `{file:...}` paths and the commands are relative to.
+    """
+
+    def __init__(self, stages: list[Stage], out: Path, repo: Path):
+        self.stages = {s.name: s for s in stages}
+        self.out, self.repo = Path(out), Path(repo)
+
+    def folder(self, name: str) -> Path:
+        return self.out / name
+
+    def partial(self, name: str) -> Path:
+        return self.out / (name + PARTIAL_SUFFIX)
+
+    def attempts_path(self, name: str) -> Path:
+        """Where a partial folder's key and attempts are kept: beside it, not in the command's
+        own folder."""
+        return self.out / (name + ATTEMPTS_SUFFIX)
+
+    def manifest(self, name: str) -> dict | None:
+        path = self.folder(name) / MANIFEST
+        if not path.exists():
+            return None
+        try:
+            return json.loads(path.read_text())
+        except json.JSONDecodeError as err:
+            raise StageError(f"{path} is corrupt: {err}") from err
+
+    def outputs_digest(self, name: str) -> str:
+        """The digest of a finished stage's files, as its manifest records them."""
+        manifest = self.manifest(name)
+        if manifest is None:
+            raise StageError(f"stage {name} has not finished in {self.out}: run it first")
+        return digest(manifest["files"])
+
+    def key(self, name: str) -> dict:
+        """What a stage's outputs depend on: its command, named files and its inputs' outputs."""
+        stage = self.stages[name]
+        files = {}
+        for rel in stage.files():
+            path = self.repo / rel
+            if not path.is_file():
+                raise StageError(f"stage {name} names {rel}, which is not a file")
+            files[rel] = sha256_file(path)[:16]
+        return {
+            "module": stage.module,
+            "args": list(stage.args),
+            "files": files,
+            "inputs": {n: self.outputs_digest(n) for n in stage.inputs},
+        }
+
+    def command(self, name: str, folder: Path) -> list[str]:
+        """The stage's argv with its placeholders filled in; `folder` is where it writes."""
+
+        def fill(match: re.Match) -> str:
+            kind, value = match.group(1), match.group(2)
+            if kind == "dir" and value is None:
+                return str(folder)
+            if kind == "stage":
+                return str(self.folder(value))
+            raise StageError(f"stage {name}: unknown placeholder {match.group(0)}")
+
+        args = [re.sub(r"\{file:([^}]+)\}", r"\1", a) for a in self.stages[name].args]
+        return [sys.executable, "-m", self.stages[name].module] + [
+            PLACEHOLDER.sub(fill, a) for a in args
+        ]
+
+    def status(self, name: str) -> str:
+        """done (whole and current), stale (made from other inputs), partial, or todo."""
+        manifest = self.manifest(name)
+        if manifest is not None:
+            if manifest["key"] != self.key(name):
+                return "stale"
+            if file_hashes(self.folder(name)) != manifest["files"]:
+                raise StageError(
+                    f"the files of {self.folder(name)} differ from its manifest: something "
+                    "changed them after the stage finished; remove the folder or --redo "
+                    f"{name}"
+                )
+            return "done"
+        return "partial" if self.partial(name).exists() else "todo"
+
+
+def _started_with(path: Path) -> tuple[dict | None, list[dict]]:
+    """The key a partial folder was started with and its earlier attempts (None, [] if none)."""
+    if not path.exists():
+        return None, []
+    record = json.loads(path.read_text())
+    return record["key"], record["attempts"]
+
+
+def _move_aside(folder: Path) -> Path:
+    stamp = datetime.datetime.now().strftime("%Y%m%d-%H%M%S")
+    aside = folder.with_name(f"{folder.name}.replaced-{stamp}")
+    folder.rename(aside)
+    return aside
+
+
+def run_stage(
+    chain: Chain, name: str, redo: bool = False, deadline_s: float | None = None, log=print
+) -> dict:
+    """Runs one stage unless it is done; returns its manifest.
+
+    Args:
+      deadline_s: seconds the command may run before it is stopped (SIGTERM, then SIGKILL after
+        `STOP_GRACE_S`) and `DeadlineReached` raised; None: no limit.
+
+    Raises:
+      StageError: its inputs are not finished, its folder was made from other inputs (without
+        `redo`), or its command failed (the partial folder stays for a resume).
+    """
+    stage = chain.stages[name]
+    status = chain.status(name)
+    if status == "done" and not redo:
+        log(f"[{name}] done: skipped (outputs match their inputs)")
+        return chain.manifest(name)
+    if status == "stale" and not redo:
+        raise StageError(
+            f"{chain.folder(name)} was made from other inputs (config or upstream outputs "
+            f"changed): give --redo {name} to rerun it (the old folder is kept beside it)"
+        )
+    key = chain.key(name)
+    partial = chain.partial(name)
+    attempts_path = chain.attempts_path(name)
+    started_key, attempts = _started_with(attempts_path)
+    if started_key is not None and started_key != key:
+        if not redo:
+            raise StageError(
+                f"{partial} was started with other inputs: remove it or give --redo {name}"
+            )
+        if partial.exists():
+            log(f"[{name}] the unfinished folder is kept as {_move_aside(partial).name}")
+        attempts = []
+    partial.mkdir(parents=True, exist_ok=True)
+    argv = chain.command(name, partial)
+    # As a person would run it by hand: into the stage's folder (this run writes to .partial
+    # first and renames it into place).
+    shown = shlex.join(["python", *chain.command(name, chain.folder(name))[1:]])
+    log(f"[{name}] {stage.about}\n[{name}] $ {shown}")
+    attempt = {"started": datetime.datetime.now().isoformat(timespec="seconds"), "wall_s": None}
+    attempts.append(attempt)
+
+    def record() -> None:
+        attempts_path.write_text(json.dumps({"key": key, "attempts": attempts}, indent=1) + "\n")
+
+    record()  # a machine lost mid-stage still leaves the key the partial folder belongs to
+    start = time.perf_counter()
+    process = subprocess.Popen(argv, cwd=chain.repo)
+    try:
+        rc = process.wait(timeout=deadline_s)
+    except subprocess.TimeoutExpired:
+        process.terminate()
+        try:
+            process.wait(timeout=STOP_GRACE_S)
+        except subprocess.TimeoutExpired:
+            process.kill()
+            process.wait()
+        raise DeadlineReached(
+            f"stage {name} stopped at the deadline; rerun to continue it"
+        ) from None
+    except BaseException:
+        process.kill()
+        process.wait()
+        raise
+    finally:
+        attempt["wall_s"] = round(time.perf_counter() - start, 1)
+        record()
+    if rc != 0:
+        raise StageError(
+            f"stage {name} failed (exit status {rc}); {partial} is kept, and a rerun with the "
+            "same config continues in it"
+        )
+    manifest = {
+        "stage": name,
+        "about": stage.about,
+        "key": key,
+        "command": shown,
+        "machine": machine(),
+        "attempts": attempts,
+        "wall_s": round(sum(a["wall_s"] or 0.0 for a in attempts), 1),
+        "files": file_hashes(partial),
+    }
+    (partial / MANIFEST).write_text(json.dumps(manifest, indent=1) + "\n")
+    target = chain.folder(name)
+    if target.exists():
+        log(f"[{name}] the earlier folder is kept as {_move_aside(target).name}")
+    partial.rename(target)
+    attempts_path.unlink()
+    log(f"[{name}] finished in {manifest['wall_s']:.0f} s")
+    return manifest
+
+
+@functools.cache
+def machine() -> str:
+    """The host's CPU and JAX's first device, asked in a child process: a JAX backend started
+    here would hold accelerator memory that the stages' own processes need."""
+    probe = "import jax; d = jax.devices()[0]; print(f'{jax.default_backend()} ({d.device_kind})')"
+    try:
+        device = subprocess.run(
+            [sys.executable, "-c", probe], capture_output=True, text=True, timeout=120
+        ).stdout.strip()
+    except (OSError, subprocess.TimeoutExpired):
+        device = "unknown"
+    return f"{cpu_model()}, {os.cpu_count()} cores; JAX: {device}"
