@@ -2,10 +2,11 @@
 
 Floors, lowest first: mjx_arm (the simulator) < tracking (non-learned tracking: metrics, held
 commands, mpc, oracle) < ccgan (learned translators) < eval (the shape evaluation) < bench
-(timings) and studies (quality studies, which share bench's run header), side by side on the top
-floor. A module may import its own floor and the ones below. Every import counts, also one inside a
-function (a deferred import still makes the lower layer depend on the higher one), so the
-modules are read with `ast`, never imported.
+(timings) and studies (quality studies, which share bench's run header), side by side, <
+experiments (the whole chain, run as stages of the commands below it). A module may import its
+own floor and the ones below. Every import counts, also one inside a function (a deferred import
+still makes the lower layer depend on the higher one), so the modules are read with `ast`, never
+imported.
 """
 
 from __future__ import annotations
@@ -16,7 +17,15 @@ from pathlib import Path
 import pytest
 
 ROOT = Path(__file__).resolve().parent.parent
-FLOORS = {"mjx_arm": 0, "tracking": 1, "ccgan": 2, "eval": 3, "bench": 4, "studies": 4}
+FLOORS = {
+    "mjx_arm": 0,
+    "tracking": 1,
+    "ccgan": 2,
+    "eval": 3,
+    "bench": 4,
+    "studies": 4,
+    "experiments": 5,
+}
 
 
 def module_files() -> dict[str, Path]:
