@@ -1,0 +1,69 @@
+# Sourced ON THE GPU MACHINE by bench/device/on_device.sh and experiments/device.sh, from the
+# repository root of the copy sent there: installs what the call carried, no network needed.
+#
+# (1) stages the carried wheel folders: .whl/ -> $TMP/whl/, .whl-warpN/ -> $TMP/wp/;
+# (2) installs the mujoco wheels once (sha256 checked) with
+#     pip install --no-index --no-deps --target $TMP/site;
+# (3) once $TMP/wp holds every piece of the warp-lang wheel (the joined file's sha256 matches),
+#     installs it the same way; then prints the versions it sees.
+# Sets SITE, OUT, PY, PYTHONPATH, MUJOCO_GL=disable and PYTHONUNBUFFERED for the caller.
+# $TMP stays as a call left it while the machine is warm (30 s after a call ends); a fresh
+# machine starts bare. Wheels come from bench/device/fetch_wheels.sh, run here first.
+TMP=${DEVICE_TMP:-/tmp} # overridable only to rehearse the calls on another machine
+SITE=$TMP/site
+WHL=$TMP/whl
+WP=$TMP/wp
+OUT=${OUT:-$TMP/out}
+PY=${PY:-python3}
+mkdir -p "$SITE" "$WHL" "$WP" "$OUT"
+export PYTHONPATH="$SITE:$PWD"
+export MUJOCO_GL=disable # no rendering here; keeps mujoco from loading EGL/OpenGL
+export PYTHONUNBUFFERED=1
+
+# (1) Stage what this call carried.
+if compgen -G ".whl/*.whl" >/dev/null; then
+  cp -f .whl/* "$WHL/"
+  echo "staged $(ls .whl/*.whl | wc -l) mujoco wheels"
+fi
+for dir in .whl-warp[0-9]*; do
+  [[ -d $dir ]] || continue
+  cp -f "$dir"/* "$WP/"
+  echo "staged $(ls "$dir" | grep -c part-) warp piece(s) from $dir"
+done
+
+# (2) mujoco, mujoco-mjx and their missing needs.
+if ! $PY -c "import mujoco.mjx" >/dev/null 2>&1; then
+  if compgen -G "$WHL/*.whl" >/dev/null; then
+    (cd "$WHL" && sha256sum -c --quiet SHA256SUMS) || { echo "mujoco wheels: bad sha256"; exit 1; }
+    $PY -m pip install -q --no-index --no-deps --no-compile --no-cache-dir --upgrade \
+      --target "$SITE" "$WHL"/*.whl || exit 1
+    echo "installed: $(cd "$WHL" && ls -- *.whl | tr '\n' ' ')"
+  else
+    echo "mujoco is not installed and no .whl was carried (machine fresh?): carry .whl"
+  fi
+fi
+
+# (3) warp-lang, once all pieces are here.
+if ! $PY -c "import warp" >/dev/null 2>&1 && [[ -f $WP/SHA256SUMS ]]; then
+  wheel=$(awk '{print $2}' "$WP/SHA256SUMS")
+  echo "warp pieces in $WP: $(cd "$WP" && ls -- *.part-* 2>/dev/null | sed 's/.*part-//' | tr '\n' ' ')"
+  cat "$WP/$wheel".part-* >"$WP/$wheel"
+  if (cd "$WP" && sha256sum -c --quiet SHA256SUMS >/dev/null 2>&1); then
+    $PY -m pip install -q --no-index --no-deps --no-compile --no-cache-dir --upgrade \
+      --target "$SITE" "$WP/$wheel" || exit 1
+    rm -f "$WP/$wheel"
+    echo "installed: $wheel"
+  else
+    rm -f "$WP/$wheel"
+    echo "warp wheel not complete yet (sha256 of the joined pieces does not match)"
+  fi
+fi
+$PY - <<'EOF'
+from importlib import metadata
+for d in ("jax", "jaxlib", "mujoco", "mujoco-mjx", "warp-lang", "numpy"):
+    try:
+        print(f"  {d} {metadata.version(d)}")
+    except metadata.PackageNotFoundError:
+        print(f"  {d} -")
+EOF
+

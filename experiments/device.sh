@@ -1,0 +1,41 @@
+#!/usr/bin/env bash
+# Runs ON THE GPU MACHINE (the device tool's `run`), from the repository root of the copy sent
+# there: the chain of experiments/paper.json, resumed from where the last call stopped.
+#
+#   bash experiments/device.sh            # install what was carried, run until the deadline
+#   RUN=0 bash experiments/device.sh      # install only
+#
+# Each call: installs the carried wheels (bench/device/install.sh); restores the run folder from
+# a carried .paper_state/paper_state.tar.gz when the machine does not hold it already; runs
+# `python -m experiments.paper --out $TMP/paper --deadline-s ${DEADLINE_S:-540}` (a stage
+# stopped at the deadline keeps its folder and continues in the next call); puts into $OUT the
+# whole run folder as paper_state.tar.gz, plus paper.md and the log.
+#
+# Sequence of `run` calls (nvidia-h100-x1 or nvidia-h200; timeout_s 600):
+#   1. carry [".whl"]:   bash experiments/device.sh
+#   2.. carry nothing, each within the machine's 30 s warm window: bash experiments/device.sh
+#      (the run folder is still in /tmp/paper), until the command says every stage is done.
+#   If the machine was lost: carry [".whl"] with `RUN=0 bash experiments/device.sh`, then at once
+#   carry [".paper_state"] (a copy of the last returned paper_state.tar.gz; the .whl and the
+#   state do not fit one call beside the ~25 MiB tree) with `bash experiments/device.sh`.
+# Here, after each call: mkdir -p .paper_state && cp FILES_AT/paper_state.tar.gz .paper_state/
+# (git-ignored). Finished: tar -xzf .paper_state/paper_state.tar.gz and commit what the README
+# names (experiments/README.md says which files).
+set -uo pipefail
+source "$(dirname "${BASH_SOURCE[0]}")/../bench/device/install.sh" || exit 1
+RUN_DIR=$TMP/paper
+if [[ ! -d $RUN_DIR && -f .paper_state/paper_state.tar.gz ]]; then
+  tar -xzf .paper_state/paper_state.tar.gz -C "$TMP" && echo "restored $RUN_DIR from .paper_state"
+fi
+[[ ${RUN:-1} == 0 ]] && exit 0
+nvidia-smi --query-gpu=name,memory.total,driver_version --format=csv,noheader || true
+CONFIG=${CONFIG:-experiments/paper.json} # experiments/quick.json rehearses the calls anywhere
+$PY -m experiments.paper --out "$RUN_DIR" --config "$CONFIG" --deadline-s "${DEADLINE_S:-540}" 2>&1 |
+  tee -a "$TMP/paper_log.txt"
+rc=${PIPESTATUS[0]}
+$PY -m experiments.paper --out "$RUN_DIR" --config "$CONFIG" --list
+tar -czf "$OUT/paper_state.tar.gz" -C "$TMP" paper
+cp -f "$TMP/paper_log.txt" "$OUT/log.txt"
+[[ -f $RUN_DIR/paper.md ]] && cp -f "$RUN_DIR/paper.md" "$OUT/"
+echo "experiments.paper exit status $rc (3: stopped at the deadline, call again); in \$OUT: $(ls "$OUT" | tr '\n' ' ')"
+exit $rc
