@@ -20,7 +20,7 @@
 #   state do not fit one call beside the ~25 MiB tree) with `bash experiments/device.sh`.
 # Here, after each call: mkdir -p .paper_state && cp FILES_AT/paper_state.tar.gz .paper_state/
 # (git-ignored). Finished: tar -xzf .paper_state/paper_state.tar.gz and commit what the README
-# names (experiments/README.md says which files).
+# names (docs/chain.md says which files).
 set -uo pipefail
 source "$(dirname "${BASH_SOURCE[0]}")/../bench/device/install.sh" || exit 1
 RUN_DIR=$TMP/paper
