@@ -128,8 +128,9 @@ class EvalConfig:
     """Video frame rate (frames per second of video)."""
     video_speedup: float = 4.0
     """Simulated seconds per video second."""
-    video_panel_hw: tuple[int, int] = (240, 320)
-    """Height, width (pixels) of each of the three video panels."""
+    video_panel_hw: tuple[int, int] = (480, 480)
+    """Height, width (pixels) of each of the three video panels (at most the model's offscreen
+    buffer, 720 x 1280 in the committed models)."""
     plots: bool = True
     """Write PNG figures."""
 
@@ -149,7 +150,8 @@ class EvalConfig:
         check_ints("n_repeats", self.n_repeats, 1)
         check_ints("video_fps", self.video_fps, 1)
         require(len(self.video_panel_hw) == 2, "video_panel_hw", "must be (height, width)")
-        check_ints("video_panel_hw", tuple(self.video_panel_hw), 1)
+        for pixels in self.video_panel_hw:  # height and width may be equal
+            check_ints("video_panel_hw", pixels, 1)
         check_fields(self, at_least={"noise_stds": 0}, above={"video_speedup": 0})
         require(
             self.out_dir is None or not Path(self.out_dir).is_file(),
