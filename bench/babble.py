@@ -53,6 +53,7 @@ import numpy as np
 
 from mjx_arm import babble
 from mjx_arm.machine import cpu_model
+from mjx_arm.programs import babble_programs
 
 
 def load_arm(args, domain: str) -> mjx_arm.Arm:
@@ -155,7 +156,7 @@ def run_bench(args) -> dict:
     }
     print(f"device {result['device']} x{len(local)}, cpu {result['cpu']} ({os.cpu_count()} cores)")
     for batch in args.sizes:
-        programs = babble.make_programs(config, np.arange(batch), domain=arm.domain.name)
+        programs = babble_programs(config, np.arange(batch), domain=arm.domain.name)
         for label, devices in device_sets.items():
             row = {"batch": batch, "devices": len(devices)}
             try:

@@ -35,6 +35,7 @@ what it measured.
 
 from __future__ import annotations
 
+import argparse
 import copy
 import dataclasses
 import json
@@ -58,26 +59,11 @@ from mjx_arm.arm import (
     rollout_program,
 )
 from mjx_arm.machine import cpu_model
+from mjx_arm.programs import bench_programs
 
 IMPLS = ("jax", "warp")
 IMPL_NAMES = {"jax": "MJX-JAX", "warp": "MJX-Warp"}
 DOMAIN_ORDER = ("source", "constrained")
-
-
-def programs(batch: int, periods: int, seed: int = 0) -> np.ndarray:
-    """Random targets in [0, 3.5] bar held 0.5-2 s: [batch, periods, 3].
-
-    Row b does not depend on `batch`, so the first rows of any two batches are the same programs.
-    """
-    rng = np.random.default_rng(seed)
-    out = np.empty((batch, periods, 3))
-    for b in range(batch):
-        t = 0
-        while t < periods:
-            hold = int(rng.integers(5, 21))
-            out[b, t : t + hold] = rng.uniform(0.0, 3.5, 3)
-            t += hold
-    return out
 
 
 WARP_DENSE_NV_MAX = 60  # MuJoCo Warp refuses a dense Jacobian above this many dofs
@@ -135,7 +121,7 @@ def sharded_commands(batch: int, periods: int):
     devices = jax.devices()
     mesh = Mesh(np.array(devices), ("batch",))
     padded = -(-batch // len(devices)) * len(devices)
-    commands = jnp.asarray(programs(padded, periods), dtype=jnp.float32)
+    commands = jnp.asarray(bench_programs(padded, periods), dtype=jnp.float32)
     return jax.device_put(commands, NamedSharding(mesh, PartitionSpec("batch"))), padded
 
 
@@ -159,7 +145,7 @@ def time_mjx(compiled, model, commands, rest: tuple, n_keep: int) -> dict:
 
 
 def time_c(arm: mjx_arm.Arm, batch: int, periods: int) -> dict:
-    commands = programs(batch, periods)
+    commands = bench_programs(batch, periods)
     arm.rollout(commands[:2, :2], backend="c")  # warm-up thread pool
     start = time.perf_counter()
     arm.rollout(commands, backend="c")
@@ -343,7 +329,35 @@ def parse_overrides(items: list[str]) -> dict:
     return overrides
 
 
-def main(argv: list[str] | None = None) -> None:
+@dataclasses.dataclass(frozen=True)
+class RunPlan:
+    """What one run measures, read from its command line."""
+
+    label: str
+    """Name of the model variant (the table's model column)."""
+    overrides: dict
+    """ArmParams fields changed from the committed model (`--set`)."""
+    domains: tuple[str, ...]
+    """Domains timed; MJX compiles for the first and reuses the program where it can."""
+    impls: tuple[str, ...]
+    """MJX implementations, jax first: warp is checked against it."""
+    batches: tuple[int, ...]
+    """MJX batch sizes (trajectories), ascending; the smallest one's programs are pose-checked."""
+    seconds: float
+    """Simulated seconds per rollout."""
+    c_batch: int
+    """MuJoCo C batch (trajectories)."""
+    n_check: int
+    """Programs in the pose check."""
+
+    @property
+    def periods(self) -> int:
+        """Control periods per rollout (10 Hz)."""
+        return int(round(self.seconds * 10))
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The command line of ``python -m bench.throughput`` (the module docstring is its help)."""
     parser = cli_parser("bench.throughput", __doc__)
     parser.add_argument("--impl", nargs="+", choices=IMPLS, default=["jax"])
     parser.add_argument("--domains", nargs="+", default=["source", "constrained"])
@@ -374,21 +388,13 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--append", action="store_true", help="keep the results in --out")
     parser.add_argument("--report-only", action="store_true", help="only rewrite the tables")
     parser.add_argument("--merge", type=Path, nargs="*", default=[], help="more result json")
-    args = parser.parse_args(argv)
-    if args.quick:
-        args.batches, args.seconds = [8], 1.0
-    overrides = parse_overrides(args.set)
-    if args.segments and "n_segments" in overrides:
-        parser.error("give --segments or --set n_segments=N, not both")
-    segments = args.segments or [None]
-    impls = [impl for impl in IMPLS if impl in args.impl]  # jax first: warp is checked against it
-    periods = int(round(args.seconds * 10))
-    cores = os.cpu_count() or 1
-    c_batch = args.c_batch or 16 * cores
-    n_check = max(1, min(args.check_batch, *args.batches))
+    return parser
 
+
+def machine_info(cores: int) -> dict:
+    """The accelerator, CPU and package versions a run's rows were measured with."""
     device = jax.devices()[0]
-    machine = {
+    return {
         "accelerator": f"{len(jax.devices())} x {device.device_kind}",
         "backend": jax.default_backend(),
         "cpu": cpu_model(),
@@ -398,96 +404,162 @@ def main(argv: list[str] | None = None) -> None:
         "mujoco_mjx": version("mujoco-mjx"),
         "warp_lang": version("warp-lang"),
     }
+
+
+def run_tag(overrides: dict, segments: list[int] | None) -> str:
+    """The result files' name tag: the overrides, and "_segments" when --segments is given."""
     tag_parts = [f"{k}-{v}" for k, v in overrides.items()]
-    if args.segments:  # not the counts themselves: runs of some counts append to one table
+    if segments:  # not the counts themselves: runs of some counts append to one table
         tag_parts.append("segments")
-    tag = "".join("_" + p for p in tag_parts)
+    return "".join("_" + p for p in tag_parts)
+
+
+def mjx_row(
+    plan: RunPlan, impl: str, domain: str, arm: mjx_arm.Arm, n_seg: int, timing: dict, c: dict
+) -> dict:
+    """One table row: an MJX timing (`time_mjx`'s plus "batch" (padded), "compile_s",
+    "compile_shared") beside MuJoCo C's rates `c` ("c_sim_s_per_s", "c_steps_per_s") in the
+    same domain; rates are simulated s per wall s and physics steps per wall s."""
+    padded, wall_s = timing["batch"], timing["wall_s"]
+    sim_rate = padded * plan.seconds / wall_s
+    return {
+        "model": plan.label,
+        "overrides": plan.overrides,
+        "impl": impl,
+        "domain": domain,
+        "segments": n_seg,
+        "nv": int(arm.mj_model.nv),
+        "model_hash": arm.model_hash,
+        "timestep_s": arm.timestep_s,
+        "batch": padded,
+        "sim_seconds": plan.seconds,
+        "mjx_compile_s": round(timing["compile_s"], 2),
+        "compile_shared": timing["compile_shared"],
+        "mjx_first_call_s": round(timing["first_call_s"], 3),
+        "mjx_wall_s": round(wall_s, 3),
+        "mjx_sim_s_per_s": round(sim_rate, 1),
+        "mjx_steps_per_s": round(padded * plan.periods * arm.n_substeps / wall_s),
+        "c_batch": plan.c_batch,
+        "c_sim_s_per_s": round(c["c_sim_s_per_s"], 1),
+        "c_steps_per_s": round(c["c_steps_per_s"]),
+        "mjx_over_c": round(sim_rate / c["c_sim_s_per_s"], 2),
+    }
+
+
+def pose_check(
+    results: Results, poses: np.ndarray, n_seg: int, domain: str, impl: str, n_check: int
+) -> dict:
+    """Stores an implementation's check poses [n_check, T, 6] and compares them with MuJoCo C's
+    (and, for warp, with MJX-JAX's of the same programs when this run has them)."""
+    results.poses[f"seg{n_seg}_{domain}_{impl}"] = poses
+    check = {
+        "segments": n_seg,
+        "domain": domain,
+        "impl": impl,
+        "programs": n_check,
+        "vs_c": pose_diff(poses, results.poses[f"seg{n_seg}_{domain}_c"]),
+    }
+    jax_poses = results.poses.get(f"seg{n_seg}_{domain}_jax")
+    if impl == "warp" and jax_poses is not None:
+        if jax_poses.shape == poses.shape:
+            check["vs_jax"] = pose_diff(poses, jax_poses)
+    return check
+
+
+def time_c_domains(plan: RunPlan, arms: dict, n_seg: int, results: Results) -> dict:
+    """MuJoCo C's rates in each domain ({domain: {"c_sim_s_per_s", "c_steps_per_s"}}); stores
+    its check poses (float64) of the first `n_check` programs."""
+    check_commands = bench_programs(plan.n_check, plan.periods)
+    rates = {}
+    for d, arm in arms.items():
+        c = time_c(arm, plan.c_batch, plan.periods)
+        rates[d] = {
+            "c_sim_s_per_s": c["batch"] * plan.seconds / c["wall_s"],
+            "c_steps_per_s": c["batch"] * plan.periods * arm.n_substeps / c["wall_s"],
+        }
+        results.poses[f"seg{n_seg}_{d}_c"] = arm.rollout(check_commands, backend="c")
+        print(f"segments {n_seg} {d}: MuJoCo C {rates[d]['c_sim_s_per_s']:.0f} sim s/s", flush=True)
+    return rates
+
+
+def time_impl(
+    plan: RunPlan, impl: str, arms: dict, n_seg: int, c_rates: dict, results: Results
+) -> None:
+    """Times one MJX implementation at every batch size in every domain, adding a row each
+    (and a pose check at the smallest batch); a domain whose model has the same signature as
+    the last compiled one reuses its program ("compile_shared")."""
+    models = {d: device_model(arm, impl) for d, arm in arms.items()}
+    fn = batched_rollout(arms[plan.domains[0]], impl)
+    for bi, batch in enumerate(plan.batches):
+        commands, padded = sharded_commands(batch, plan.periods)
+        compiled, compiled_for, compile_s = None, None, 0.0
+        for d, arm in arms.items():
+            rest = (jnp.asarray(arm.rest_qpos), jnp.asarray(arm.rest_qvel))
+            shared = compiled is not None and same_signature(compiled_for, models[d])
+            if not shared:
+                start = time.perf_counter()
+                compiled = fn.lower(models[d], commands, *rest).compile()
+                compile_s = time.perf_counter() - start
+                compiled_for = models[d]
+            r = time_mjx(compiled, models[d], commands, rest, plan.n_check if bi == 0 else 0)
+            r |= {"batch": padded, "compile_s": compile_s, "compile_shared": shared}
+            row = mjx_row(plan, impl, d, arm, n_seg, r, c_rates[d])
+            print(row, flush=True)
+            if bi == 0:
+                check = pose_check(results, r["poses"], n_seg, d, impl, plan.n_check)
+                print(check, flush=True)
+                results.add_check(check, write=False)
+            results.add_row(row)
+
+
+def time_segments(plan: RunPlan, n_segments: int | None, results: Results) -> None:
+    """Times one chain (`n_segments`, None: the overrides' own count): MuJoCo C, then each MJX
+    implementation, in every domain."""
+    params = dataclasses.replace(mjx_arm.ArmParams(), **plan.overrides)
+    if n_segments is not None:
+        params = dataclasses.replace(params, n_segments=n_segments)
+    xml = mjx_arm.generate_xml(params)
+    arms = {d: mjx_arm.load(xml=xml, domain=d) for d in plan.domains}
+    c_rates = time_c_domains(plan, arms, params.n_segments, results)
+    for impl in plan.impls:
+        time_impl(plan, impl, arms, params.n_segments, c_rates, results)
+
+
+def main(argv: list[str] | None = None) -> None:
+    """Runs ``python -m bench.throughput`` with `argv` (default: sys.argv[1:])."""
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    if args.quick:
+        args.batches, args.seconds = [8], 1.0
+    overrides = parse_overrides(args.set)
+    if args.segments and "n_segments" in overrides:
+        parser.error("give --segments or --set n_segments=N, not both")
+    cores = os.cpu_count() or 1
+    plan = RunPlan(
+        label=args.label,
+        overrides=overrides,
+        domains=tuple(args.domains),
+        impls=tuple(impl for impl in IMPLS if impl in args.impl),
+        batches=tuple(sorted(args.batches)),
+        seconds=args.seconds,
+        c_batch=args.c_batch or 16 * cores,
+        n_check=max(1, min(args.check_batch, *args.batches)),
+    )
     command = (
         ""
         if args.report_only
         else "python -m bench.throughput " + shlex.join(argv if argv is not None else sys.argv[1:])
     )
-    results = Results(args.out, tag, machine, command, args.append or args.report_only)
+    tag = run_tag(overrides, args.segments)
+    results = Results(args.out, tag, machine_info(cores), command, args.append or args.report_only)
     for path in args.merge:
         results.merge(path)
     if args.report_only:
         results.write()
         print(results.markdown())
         return
-
-    for n in segments:
-        params = dataclasses.replace(mjx_arm.ArmParams(), **overrides)
-        if n is not None:
-            params = dataclasses.replace(params, n_segments=n)
-        xml = mjx_arm.generate_xml(params)
-        arms = {d: mjx_arm.load(xml=xml, domain=d) for d in args.domains}
-        first = arms[args.domains[0]]
-        n_seg = params.n_segments
-        check_commands = programs(n_check, periods)
-        c_rate, c_steps = {}, {}
-        for d, arm in arms.items():
-            c = time_c(arm, c_batch, periods)
-            c_rate[d] = c["batch"] * args.seconds / c["wall_s"]
-            c_steps[d] = c["batch"] * periods * arm.n_substeps / c["wall_s"]
-            results.poses[f"seg{n_seg}_{d}_c"] = arm.rollout(check_commands, backend="c")
-            print(f"segments {n_seg} {d}: MuJoCo C {c_rate[d]:.0f} sim s/s", flush=True)
-        for impl in impls:
-            models = {d: device_model(arm, impl) for d, arm in arms.items()}
-            fn = batched_rollout(first, impl)
-            for bi, batch in enumerate(sorted(args.batches)):
-                commands, padded = sharded_commands(batch, periods)
-                compiled, compiled_for, compile_s = None, None, 0.0
-                for d, arm in arms.items():
-                    rest = (jnp.asarray(arm.rest_qpos), jnp.asarray(arm.rest_qvel))
-                    shared = compiled is not None and same_signature(compiled_for, models[d])
-                    if not shared:
-                        start = time.perf_counter()
-                        compiled = fn.lower(models[d], commands, *rest).compile()
-                        compile_s = time.perf_counter() - start
-                        compiled_for = models[d]
-                    r = time_mjx(compiled, models[d], commands, rest, n_check if bi == 0 else 0)
-                    steps = periods * arm.n_substeps
-                    sim_rate = padded * args.seconds / r["wall_s"]
-                    row = {
-                        "model": args.label,
-                        "overrides": overrides,
-                        "impl": impl,
-                        "domain": d,
-                        "segments": n_seg,
-                        "nv": int(arm.mj_model.nv),
-                        "model_hash": arm.model_hash,
-                        "timestep_s": arm.timestep_s,
-                        "batch": padded,
-                        "sim_seconds": args.seconds,
-                        "mjx_compile_s": round(compile_s, 2),
-                        "compile_shared": shared,
-                        "mjx_first_call_s": round(r["first_call_s"], 3),
-                        "mjx_wall_s": round(r["wall_s"], 3),
-                        "mjx_sim_s_per_s": round(sim_rate, 1),
-                        "mjx_steps_per_s": round(padded * steps / r["wall_s"]),
-                        "c_batch": c_batch,
-                        "c_sim_s_per_s": round(c_rate[d], 1),
-                        "c_steps_per_s": round(c_steps[d]),
-                        "mjx_over_c": round(sim_rate / c_rate[d], 2),
-                    }
-                    print(row, flush=True)
-                    if bi == 0:
-                        key = f"seg{n_seg}_{d}_{impl}"
-                        results.poses[key] = r["poses"]
-                        check = {
-                            "segments": n_seg,
-                            "domain": d,
-                            "impl": impl,
-                            "programs": n_check,
-                            "vs_c": pose_diff(r["poses"], results.poses[f"seg{n_seg}_{d}_c"]),
-                        }
-                        jax_poses = results.poses.get(f"seg{n_seg}_{d}_jax")
-                        if impl == "warp" and jax_poses is not None:
-                            if jax_poses.shape == r["poses"].shape:
-                                check["vs_jax"] = pose_diff(r["poses"], jax_poses)
-                        print(check, flush=True)
-                        results.add_check(check, write=False)
-                    results.add_row(row)
+    for n in args.segments or [None]:
+        time_segments(plan, n, results)
     print(results.markdown())
 
 

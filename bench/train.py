@@ -13,6 +13,7 @@ Writes train.md and train.json (train_paper.* with --paper) to --out.
 
 from __future__ import annotations
 
+import argparse
 import dataclasses
 import json
 import time
@@ -29,6 +30,7 @@ from ccgan import data as data_lib
 from ccgan import train as train_lib
 from ccgan.cli import cli_parser
 from ccgan.models import ForwardModel
+from mjx_arm.programs import random_held_programs
 
 #: The paper's training time for one CCGAN-GP (12 h 32 min).
 PAPER_WALL_S = 12 * 3600 + 32 * 60
@@ -39,7 +41,7 @@ def synthetic_data(n_traj: int, samples: int, config: config_lib.TrainConfig, se
     rng = np.random.default_rng(seed)
     arrays = []
     for _ in range(2):
-        p = data_lib.random_held_programs(rng, n_traj, samples)
+        p = random_held_programs(rng, n_traj, samples)
         x = np.cumsum(rng.normal(scale=0.01, size=(n_traj, samples, 6)), axis=1)
         arrays += [p, x.astype(np.float32)]
     return data_lib.prepare(*arrays, config.window_length, config.n_val, config.stride)
@@ -170,7 +172,8 @@ def _hms(s: float) -> str:
     return f"{s // 3600} h {s % 3600 // 60:02d} min {s % 60:02d} s"
 
 
-def main(argv=None) -> None:
+def build_parser() -> argparse.ArgumentParser:
+    """The command line of ``python -m bench.train`` (the module docstring is its help)."""
     parser = cli_parser("bench.train", __doc__)
     parser.add_argument(
         "--out", default="runs/bench", help="output folder (committed results: bench/results)"
@@ -207,26 +210,102 @@ def main(argv=None) -> None:
         choices=config_lib.FEEDBACK_IMPLS,
         help="feedback rollout implementations timed (TrainConfig.feedback_impl)",
     )
-    args = parser.parse_args(argv)
+    return parser
+
+
+def bench_data(args: argparse.Namespace, config: config_lib.TrainConfig):
+    """The timed data: the babbling folder `--data`, else synthetic data (50 + n_val
+    trajectories per domain with --paper, else --n-traj).
+
+    Returns:
+      (prepared `TranslationData`, trajectories per domain, samples (control steps) per
+      trajectory: the folder's own with --data, else --samples).
+    """
+    if args.data:
+        data = babbling_data(Path(args.data), config)
+        samples = data.source.val.shape[1]
+        n_traj = data.source.train.shape[0] * config.stride // samples + config.n_val
+    else:
+        samples = args.samples
+        n_traj = 50 + config.n_val if args.paper else args.n_traj
+        data = synthetic_data(n_traj, samples, config)
+    return data, n_traj, samples
+
+
+def paper_section(args, config, data, fc_params, fwd, report: dict) -> list[str]:
+    """Times the whole --paper run (through `train_and_evaluate` with --workdir); records it in
+    `report` as "paper_run" and returns its markdown lines."""
+    seeds = tuple(range(args.paper_seeds))
+    if args.workdir:
+        res = run_paper_to_workdir(config, data, fc_params, fwd, seeds, Path(args.workdir))
+    else:
+        res = run_paper(config, data, fc_params, fwd, seeds)
+    res["feedback"] = config.feedback_impl
+    report["paper_run"] = res
+    lines = [
+        "| feedback | seeds | epochs | compile (s) | s / epoch | total | paper (PyTorch) |",
+        "|---|---|---|---|---|---|---|",
+        f"| {res['feedback']} | {len(seeds)} | {res['epochs']} "
+        f"| {'in total' if np.isnan(res['compile_s']) else format(res['compile_s'], '.1f')} "
+        f"| {res['epoch_s']:.3f} "
+        f"| {_hms(res['total_s'])} | {_hms(PAPER_WALL_S)} |",
+    ]
+    if args.workdir:
+        lines += [
+            "",
+            f"Through `train_and_evaluate` (checkpoints, CSV, translator files; compile "
+            f"included in the total): final k {res['k_final']}, validation tracking error "
+            f"(through F_c) {res['val_error_cm_final']} cm at the end, best "
+            f"{res['val_error_cm_best']} cm.",
+        ]
+    return lines
+
+
+def timings_section(args, config, data, fc_params, fwd, report: dict) -> list[str]:
+    """Times `--epochs` epochs for every feedback implementation, seed count and k; records
+    the rows in `report` as "timings" and returns their markdown lines."""
+    ks = args.k or [min(config.hold_factors), max(config.hold_factors)]
+    rows = []
+    for impl in args.feedback_impls:
+        conf = dataclasses.replace(config, feedback_impl=impl)
+        for n_seeds in args.seeds:
+            for k in ks:
+                r = time_epochs(conf, data, fc_params, fwd, n_seeds, k, args.epochs)
+                r["feedback"] = impl
+                rows.append(r)
+                print(json.dumps(r), flush=True)
+    report["timings"] = rows
+    lines = [
+        "| feedback | seeds | k | compile (s) | s / epoch | k selection (s) "
+        "| s / epoch incl. selection |",
+        "|---|---|---|---|---|---|---|",
+    ]
+    lines += [
+        f"| {r['feedback']} | {r['seeds']} | {r['k']} | {r['compile_s']:.1f} "
+        f"| {r['epoch_s']:.3f} "
+        f"| {r['select_s']:.3f} | {r['epoch_with_select_s']:.3f} |"
+        for r in rows
+    ]
+    return lines
+
+
+def main(argv=None) -> None:
+    """Runs ``python -m bench.train`` with `argv` (default: sys.argv[1:]); writes
+    ``<out>/<name>.json`` and ``.md`` (name: train or train_paper, then --tag)."""
+    args = build_parser().parse_args(argv)
     args.feedback_impls = [train_lib.resolved_feedback_impl(i) for i in args.feedback_impls]
 
     config = config_lib.TrainConfig(feedback_impl=args.feedback_impls[0], epochs=args.paper_epochs)
     if args.feedback_unroll:
         config = dataclasses.replace(config, feedback_unroll=args.feedback_unroll)
     fwd = ForwardModel()
-    if args.data:
-        data = babbling_data(Path(args.data), config)
-        args.samples = data.source.val.shape[1]
-        n_traj = data.source.train.shape[0] * config.stride // args.samples + config.n_val
-    else:
-        n_traj = 50 + config.n_val if args.paper else args.n_traj
-        data = synthetic_data(n_traj, args.samples, config)
+    data, n_traj, samples = bench_data(args, config)
     fc_params = forward_c_params(fwd, args.forward_c)
     steps = min(data.source.train.shape[0], data.constrained.train.shape[0]) // config.batch_size
     report = run_header("bench.train", argv) | {
         "n_devices": jax.device_count(),
         "trajectories_per_domain": n_traj,
-        "samples": args.samples,
+        "samples": samples,
         "train_windows": int(data.source.train.shape[0]),
         "steps_per_epoch": steps,
         "config": config.to_dict(),
@@ -236,61 +315,15 @@ def main(argv=None) -> None:
     lines = [
         f"# CCGAN-GP training time ({report['device']} x {report['n_devices']}, {report['cpu']})",
         "",
-        f"{n_traj} trajectories x {args.samples} samples per domain ({config.n_val} held out), "
+        f"{n_traj} trajectories x {samples} samples per domain ({config.n_val} held out), "
         f"window {config.window_length}, batch {config.batch_size}: {steps} steps per epoch; "
         f"feedback rollout {config.feedback_impl}, {config.feedback_unroll} periods per loop "
         f"iteration; jax {jax.__version__}. Command: `{report['command']}`.",
         "",
     ]
-    if args.paper:
-        seeds = tuple(range(args.paper_seeds))
-        if args.workdir:
-            res = run_paper_to_workdir(config, data, fc_params, fwd, seeds, Path(args.workdir))
-        else:
-            res = run_paper(config, data, fc_params, fwd, seeds)
-        res["feedback"] = config.feedback_impl
-        report["paper_run"] = res
-        lines += [
-            "| feedback | seeds | epochs | compile (s) | s / epoch | total | paper (PyTorch) |",
-            "|---|---|---|---|---|---|---|",
-            f"| {res['feedback']} | {len(seeds)} | {res['epochs']} "
-            f"| {'in total' if np.isnan(res['compile_s']) else format(res['compile_s'], '.1f')} "
-            f"| {res['epoch_s']:.3f} "
-            f"| {_hms(res['total_s'])} | {_hms(PAPER_WALL_S)} |",
-        ]
-        if args.workdir:
-            lines += [
-                "",
-                f"Through `train_and_evaluate` (checkpoints, CSV, translator files; compile "
-                f"included in the total): final k {res['k_final']}, validation tracking error "
-                f"(through F_c) {res['val_error_cm_final']} cm at the end, best "
-                f"{res['val_error_cm_best']} cm.",
-            ]
-        name = "train_paper" + args.tag
-    else:
-        ks = args.k or [min(config.hold_factors), max(config.hold_factors)]
-        rows = []
-        for impl in args.feedback_impls:
-            conf = dataclasses.replace(config, feedback_impl=impl)
-            for n_seeds in args.seeds:
-                for k in ks:
-                    r = time_epochs(conf, data, fc_params, fwd, n_seeds, k, args.epochs)
-                    r["feedback"] = impl
-                    rows.append(r)
-                    print(json.dumps(r), flush=True)
-        report["timings"] = rows
-        lines += [
-            "| feedback | seeds | k | compile (s) | s / epoch | k selection (s) "
-            "| s / epoch incl. selection |",
-            "|---|---|---|---|---|---|---|",
-        ]
-        lines += [
-            f"| {r['feedback']} | {r['seeds']} | {r['k']} | {r['compile_s']:.1f} "
-            f"| {r['epoch_s']:.3f} "
-            f"| {r['select_s']:.3f} | {r['epoch_with_select_s']:.3f} |"
-            for r in rows
-        ]
-        name = "train" + args.tag
+    section = paper_section if args.paper else timings_section
+    lines += section(args, config, data, fc_params, fwd, report)
+    name = ("train_paper" if args.paper else "train") + args.tag
     (out / f"{name}.json").write_text(json.dumps(report, indent=2))
     (out / f"{name}.md").write_text("\n".join(lines) + "\n")
     print("\n".join(lines))

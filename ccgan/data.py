@@ -265,35 +265,6 @@ def prepare(
     )
 
 
-def random_held_programs(
-    rng: np.random.Generator,
-    n: int,
-    steps: int,
-    max_hold: int = 5,
-    p_max_bar: float = P_MAX_BAR,
-) -> np.ndarray:
-    """Random babbling programs: uniform pressures held for 1..max_hold control steps.
-
-    Args:
-      rng: numpy generator.
-      n: programs.
-      steps: T, control steps per program (10 Hz).
-      max_hold: longest hold (steps).
-      p_max_bar: top pressure (bar).
-
-    Returns:
-      [n, steps, 3] commands (bar).
-    """
-    out = np.zeros((n, steps, 3))
-    for i in range(n):
-        t = 0
-        while t < steps:
-            hold = int(rng.integers(1, max_hold + 1))
-            out[i, t : t + hold] = rng.uniform(0.0, p_max_bar, 3)
-            t += hold
-    return out
-
-
 def simulate(arm, pressures_bar: np.ndarray) -> np.ndarray:
     """Poses [N, T, 6] of programs [N, T, 3] (bar) on an `mjx_arm.Arm`, with MuJoCo C."""
     return np.asarray(arm.rollout(pressures_bar, backend="c"), np.float32)

@@ -45,6 +45,7 @@ from mjx_arm import constants, cosserat, fidelity_report, valve
 from mjx_arm.arm import time_constant_63
 from mjx_arm.machine import cpu_model
 from mjx_arm.model_gen import ArmParams, generate_xml
+from mjx_arm.programs import full_range_program, held_program
 
 STATIC_PRESSURES_BAR = (1.0, 2.0, 3.5)
 STEP_PRESSURE_BAR = 2.0
@@ -71,37 +72,6 @@ LIMITS = {
 #: Full-range stability programs: seeds, and holds of 0.1-1 s between the valve's two ends.
 STABILITY_SEEDS = (10, 11, 12, 13)
 STABILITY_HOLD_PERIODS = (1, 10)
-
-
-def babble_program(
-    seed: int, seconds: float = BABBLE_SECONDS, hold_periods: tuple[int, int] = BABBLE_HOLD_PERIODS
-) -> np.ndarray:
-    """Pseudo-random commands [T, 3] (bar) at 10 Hz: uniform targets in [0.2, 3.5] bar per
-    chamber, all three held together for a random number of control periods in `hold_periods`
-    (default 0.5-3 s), then redrawn."""
-    rng = np.random.default_rng(seed)
-    n_periods = int(round(seconds * constants.CONTROL_HZ))
-    program = np.empty((n_periods, 3))
-    t = 0
-    while t < n_periods:
-        hold = int(rng.integers(hold_periods[0], hold_periods[1] + 1))
-        program[t : t + hold] = rng.uniform(constants.P_MIN_BAR, constants.P_MAX_BAR, 3)
-        t += hold
-    return program
-
-
-def full_range_program(seed: int, seconds: float = BABBLE_SECONDS) -> np.ndarray:
-    """Commands [T, 3] (bar) that jump each chamber between the valve's ends (0 and 3.5 bar)
-    every 0.1-1 s: the hardest program for an explicit integrator."""
-    rng = np.random.default_rng(seed)
-    n_periods = int(round(seconds * constants.CONTROL_HZ))
-    program = np.empty((n_periods, 3))
-    t = 0
-    while t < n_periods:
-        hold = int(rng.integers(STABILITY_HOLD_PERIODS[0], STABILITY_HOLD_PERIODS[1] + 1))
-        program[t : t + hold] = rng.choice([0.0, constants.P_MAX_BAR], 3)
-        t += hold
-    return program
 
 
 def chain_xml(n_segments: int) -> str:
@@ -198,7 +168,9 @@ def rod_reference(domain: str, n_elements: int) -> dict:
         name: rod_t63(params, STEP_HOLD_S[domain], use_valve)
         for name, use_valve in (("valve", True), ("no_valve", False))
     }
-    programs = np.stack([babble_program(s) for s in BABBLE_SEEDS])
+    programs = np.stack(
+        [held_program(s, BABBLE_SECONDS, BABBLE_HOLD_PERIODS) for s in BABBLE_SEEDS]
+    )
     babble = cosserat.rollout(programs, params)
     return {
         "params": params,
@@ -306,7 +278,9 @@ def verdict(row: dict) -> dict:
 def stability(n_segments: int) -> dict:
     """Full-range programs on MuJoCo C (rollouts and a stepped loop counting MuJoCo's warnings)
     and on MJX (this machine's JAX backend), per domain."""
-    programs = np.stack([full_range_program(s) for s in STABILITY_SEEDS])
+    programs = np.stack(
+        [full_range_program(s, BABBLE_SECONDS, STABILITY_HOLD_PERIODS) for s in STABILITY_SEEDS]
+    )
     out = {}
     for domain in DOMAINS:
         arm = mjx_arm.load(xml=chain_xml(n_segments), domain=domain)

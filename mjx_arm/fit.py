@@ -47,9 +47,9 @@ from tqdm import tqdm
 import mjx_arm
 from mjx_arm import constants, cosserat, domains, fitted
 from mjx_arm.arm import SimulationDivergedError
-from mjx_arm.fidelity import babble_program
 from mjx_arm.machine import cpu_model
 from mjx_arm.model_gen import ArmParams, generate_xml
+from mjx_arm.programs import held_program
 
 #: Babbling seeds of the fit data (the fidelity report holds out seeds 0-2).
 FIT_SEEDS = (100, 101, 102)
@@ -98,7 +98,7 @@ def initial_log() -> np.ndarray:
 
 def reference_data(seeds=FIT_SEEDS, seconds: float = FIT_SECONDS) -> dict[str, dict]:
     """Programs [N, T, 3] (bar) and rod poses [N, T, 6] for each fit domain."""
-    programs = np.stack([babble_program(s, seconds, FIT_HOLD_PERIODS) for s in seeds])
+    programs = np.stack([held_program(s, seconds, FIT_HOLD_PERIODS) for s in seeds])
     out = {}
     for domain in FIT_DOMAINS:
         params = cosserat.CosseratParams.from_arm(ArmParams(), domain)

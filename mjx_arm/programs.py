@@ -25,13 +25,24 @@ Signal types, as in the paper's "sinusoid, ramp, staircase and phase changes":
 `shape_like_program(s)` draws random programs of the same signal types (never a test shape), for
 fine-tuning and validating translators; `validation_program` is the smooth program the
 evaluation picks its stretch factor on.
+
+The random step programs (random targets held for random times) live here too, one family each:
+  babble_program(s)     the babbling datasets (`mjx_arm.babble`, `ccgan.finetune`): each chamber
+                        switches on its own, one NumPy stream per (domain, split, trajectory)
+  random_held_programs  all three chambers switch together, drawn one after another from one
+                        generator (`ccgan`'s tests and synthetic data, `bench.train`); with
+                        `bench_programs` (`bench.throughput`, `studies.timestep`) and
+                        `held_program` (the rod comparisons, `mjx_arm.fidelity` and `mjx_arm.fit`)
+                        as fixed settings of it
+  full_range_program    bang-bang between 0 and 3.5 bar (`mjx_arm.fidelity`'s stability runs)
 """
 
 from __future__ import annotations
 
 import math
 import zlib
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
+from typing import Protocol
 
 import numpy as np
 
@@ -230,8 +241,8 @@ def shape_like_programs(
     n: int, duration_s: float, seed: int = 0, split: str = "train", full_scale: bool = False
 ) -> np.ndarray:
     """[n, T, 3] `shape_like_program`s (bar, float32); program i of a split draws from
-    ``np.random.default_rng([seed, crc32("shape_like/" + split), i])``, whatever n is."""
-    stream = zlib.crc32(f"shape_like/{split}".encode()) & 0x7FFFFFFF
+    ``np.random.default_rng([seed, stream_id("shape_like", split), i])``, whatever n is."""
+    stream = stream_id("shape_like", split)
     return np.stack(
         [
             shape_like_program(np.random.default_rng([seed, stream, i]), duration_s, full_scale)
@@ -250,3 +261,156 @@ SHAPES: dict[str, Callable[..., np.ndarray]] = {
 }
 #: Shapes whose programs repeat every PERIOD_S.
 PERIODIC_SHAPES = ("circle", "rectangle", "ellipse", "kite")
+
+
+# ---------------------------------------------------------------------------- random step programs
+
+
+def stream_id(family: str, split: str) -> int:
+    """A stable 31-bit id of a random stream: crc32 of ``"<family>/<split>"``.
+
+    Seeding each program with ``[seed, stream_id(...), i]`` makes program i of a stream the same
+    whatever else is drawn beside it (batch, chunk, device count).
+    """
+    return zlib.crc32(f"{family}/{split}".encode()) & 0x7FFFFFFF
+
+
+class BabbleSpec(Protocol):
+    """What a babbling program needs of its run's settings; `mjx_arm.babble.BabbleConfig` has it
+    (a protocol: `mjx_arm.babble` imports this module, so this one cannot import it back)."""
+
+    @property
+    def seed(self) -> int: ...  # root seed of every program
+
+    @property
+    def n_steps(self) -> int: ...  # control periods per program (T)
+
+    @property
+    def hold_min_steps(self) -> int: ...  # shortest hold (control periods)
+
+    @property
+    def hold_max_steps(self) -> int: ...  # longest hold (control periods)
+
+    @property
+    def p_low_bar(self) -> float: ...  # lowest target (bar)
+
+    @property
+    def p_high_bar(self) -> float: ...  # highest target (bar)
+
+
+def babble_program(rng: np.random.Generator, spec: BabbleSpec) -> np.ndarray:
+    """One babbling program [T, 3] (bar, float32), T = spec.n_steps.
+
+    Each chamber on its own jumps to a uniform target in [p_low_bar, p_high_bar] and holds it for
+    a uniform whole number of periods in [hold_min_steps, hold_max_steps]; the chambers switch at
+    different times, so the programs visit the whole pressure cube.
+    """
+    n_steps, lo, hi = spec.n_steps, spec.hold_min_steps, spec.hold_max_steps
+    n_holds = n_steps // lo + 1  # enough holds to cover T even if every one is the shortest
+    holds = rng.integers(lo, hi + 1, size=(3, n_holds))
+    targets = rng.uniform(spec.p_low_bar, spec.p_high_bar, size=(3, n_holds))
+    steps = np.arange(n_steps)
+    which = np.stack([np.searchsorted(end, steps, side="right") for end in holds.cumsum(1)])
+    return np.take_along_axis(targets, which, axis=1).T.astype(np.float32)
+
+
+def babble_programs(
+    spec: BabbleSpec, indices: Sequence[int], *, domain: str = "source", split: str = "train"
+) -> np.ndarray:
+    """Babbling programs of the given trajectory indices.
+
+    Trajectory i draws from ``np.random.default_rng([seed, stream_id(domain, split), i])``, so it
+    is the same whatever else is generated with it.
+
+    Args:
+      spec: babbling options (seed, duration, pressure range, hold durations), e.g. a
+        `mjx_arm.babble.BabbleConfig`.
+      indices: [B] int trajectory indices (>= 0) within the (domain, split) stream.
+      domain, split: name the random stream.
+
+    Returns:
+      [B, T, 3] float32 chamber commands (bar), T = spec.n_steps.
+    """
+    stream = stream_id(domain, split)
+    out = np.empty((len(indices), spec.n_steps, 3), np.float32)
+    for row, i in enumerate(indices):
+        out[row] = babble_program(np.random.default_rng([spec.seed, stream, int(i)]), spec)
+    return out
+
+
+def random_held_programs(
+    rng: np.random.Generator,
+    n: int,
+    steps: int,
+    max_hold: int = 5,
+    p_max_bar: float = P_HIGH_BAR,
+    *,
+    min_hold: int = 1,
+    p_min_bar: float = 0.0,
+) -> np.ndarray:
+    """Random programs whose three chambers switch together: uniform targets held for random times.
+
+    Programs are drawn one after another from `rng`, so program i depends on the ones before it
+    but not on `n`: the first programs of two calls with the same seed are the same.
+
+    Args:
+      rng: numpy generator.
+      n: programs.
+      steps: T, control steps per program (10 Hz).
+      max_hold: longest hold (control steps).
+      p_max_bar: top target (bar).
+      min_hold: shortest hold (control steps).
+      p_min_bar: bottom target (bar); targets under the 0.2 bar valve floor act as the floor.
+
+    Returns:
+      [n, steps, 3] float64 commands (bar).
+    """
+    out = np.zeros((n, steps, 3))
+    for i in range(n):
+        t = 0
+        while t < steps:
+            hold = int(rng.integers(min_hold, max_hold + 1))
+            out[i, t : t + hold] = rng.uniform(p_min_bar, p_max_bar, 3)
+            t += hold
+    return out
+
+
+def bench_programs(batch: int, periods: int, seed: int = 0) -> np.ndarray:
+    """The timing runs' programs [batch, periods, 3] (bar, float64): targets in [0, 3.5] bar held
+    0.5-2 s (`random_held_programs`, 5-20 periods).
+
+    Row b does not depend on `batch`, so the first rows of any two batches are the same programs.
+    """
+    rng = np.random.default_rng(seed)
+    return random_held_programs(rng, batch, periods, max_hold=20, p_max_bar=P_HIGH_BAR, min_hold=5)
+
+
+def held_program(seed: int, seconds: float, hold_periods: tuple[int, int]) -> np.ndarray:
+    """One program [T, 3] (bar, float64) of its own seed, T = 10 * seconds: uniform targets in the
+    valve range [0.2, 3.5] bar, all three chambers held together for a random number of control
+    periods in `hold_periods` (inclusive), then redrawn.
+
+    The programs the chain is compared with the reference rod on (`mjx_arm.fidelity`) and fitted
+    to it on (`mjx_arm.fit`), each from its own seed.
+    """
+    n_periods = int(round(seconds * CONTROL_HZ))
+    rng = np.random.default_rng(seed)
+    low, high = hold_periods
+    return random_held_programs(
+        rng, 1, n_periods, max_hold=high, p_max_bar=P_HIGH_BAR, min_hold=low, p_min_bar=P_LOW_BAR
+    )[0]
+
+
+def full_range_program(seed: int, seconds: float, hold_periods: tuple[int, int]) -> np.ndarray:
+    """Commands [T, 3] (bar, float64), T = 10 * seconds, that jump each chamber between the valve's
+    ends (0 and 3.5 bar) every `hold_periods` control periods (inclusive), all three together:
+    the hardest program for an explicit integrator (`mjx_arm.fidelity`'s stability runs)."""
+    rng = np.random.default_rng(seed)
+    n_periods = int(round(seconds * CONTROL_HZ))
+    program = np.empty((n_periods, 3))
+    t = 0
+    while t < n_periods:
+        hold = int(rng.integers(hold_periods[0], hold_periods[1] + 1))
+        program[t : t + hold] = rng.choice([0.0, P_HIGH_BAR], 3)
+        t += hold
+    return program

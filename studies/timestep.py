@@ -21,10 +21,10 @@ import mujoco
 import numpy as np
 
 import mjx_arm
-from bench.throughput import programs
 from ccgan.cli import cli_parser
 from mjx_arm import ArmParams, generate_xml
 from mjx_arm.machine import cpu_model
+from mjx_arm.programs import bench_programs
 
 REFERENCE_STEP_S = 0.0005
 
@@ -57,7 +57,7 @@ def main(argv: list[str] | None = None) -> None:
         help="output folder (committed results: studies/results/cpu)",
     )
     args = parser.parse_args(argv)
-    commands = programs(args.trajectories, int(round(args.seconds * 10)), seed=7)
+    commands = bench_programs(args.trajectories, int(round(args.seconds * 10)), seed=7)
 
     def load(n, dt, domain):
         params = dataclasses.replace(ArmParams(), n_segments=n, timestep_s=dt)

@@ -15,6 +15,8 @@ import numpy as np
 import pytest
 
 from mjx_arm import atomic, babble, dataset
+from mjx_arm.babble import cli as babble_cli
+from mjx_arm.programs import babble_programs
 from mjx_arm.dataset import DatasetError, ModelHashMismatchError
 
 CONFIG = babble.BabbleConfig(n_train=3, n_val=1, duration_s=2.0, chunk=2, backend="c")
@@ -41,7 +43,7 @@ def datasets(xml):
 
 def test_programs_shape_range_and_holds():
     config = babble.BabbleConfig(duration_s=30.0)
-    p = babble.make_programs(config, np.arange(4))
+    p = babble_programs(config, np.arange(4))
     assert p.shape == (4, 300, 3) and p.dtype == np.float32
     assert p.min() >= 0.0 and p.max() <= mjx_arm.P_MAX_BAR
     # Each chamber holds a target for 5..30 control periods (the last hold may be cut by T).
@@ -55,13 +57,13 @@ def test_programs_shape_range_and_holds():
 
 
 def test_programs_deterministic_per_seed_and_index():
-    a = babble.make_programs(CONFIG, np.arange(5))
-    np.testing.assert_array_equal(a, babble.make_programs(CONFIG, np.arange(5)))
+    a = babble_programs(CONFIG, np.arange(5))
+    np.testing.assert_array_equal(a, babble_programs(CONFIG, np.arange(5)))
     # Trajectory i does not depend on which others are drawn with it (chunking is invisible).
-    np.testing.assert_array_equal(a[[4, 1]], babble.make_programs(CONFIG, [4, 1]))
-    other_seed = babble.make_programs(dataclasses.replace(CONFIG, seed=1), np.arange(5))
-    other_split = babble.make_programs(CONFIG, np.arange(5), split="val")
-    other_domain = babble.make_programs(CONFIG, np.arange(5), domain="constrained")
+    np.testing.assert_array_equal(a[[4, 1]], babble_programs(CONFIG, [4, 1]))
+    other_seed = babble_programs(dataclasses.replace(CONFIG, seed=1), np.arange(5))
+    other_split = babble_programs(CONFIG, np.arange(5), split="val")
+    other_domain = babble_programs(CONFIG, np.arange(5), domain="constrained")
     for b in (other_seed, other_split, other_domain):
         assert not np.array_equal(a, b)
 
@@ -91,7 +93,7 @@ def test_auto_backend_is_c_on_cpu():
 
 def test_sharded_mjx_pads_and_agrees_with_c(arm):
     """One device: a 3-program batch padded to 4, against MuJoCo C; chunked run is identical."""
-    programs = babble.make_programs(CONFIG, np.arange(3))
+    programs = babble_programs(CONFIG, np.arange(3))
     sharded = babble.ShardedRollout(arm)
     assert sharded.n_devices == len(jax.devices()) == 1
     assert babble.padded_size(3, 1) == 3 and babble.padded_size(3, 2) == 4
@@ -181,12 +183,12 @@ def test_cli_writes_one_file_per_domain_and_split(tmp_path, xml, monkeypatch):
     model.write_text(xml)
     argv = ["--domain", "source", "--n", "2", "--n-val", "1", "--duration", "1", "--seed", "3"]
     argv += ["--model", str(model), "--out", str(tmp_path / "out"), "--no-progress"]
-    assert babble.main(argv) == 0
+    assert babble_cli.main(argv) == 0
     files = sorted(p.name for p in (tmp_path / "out").iterdir())
     assert files == ["manifest.json", "source_train.npz", "source_val.npz"]
     d = dataset.load_dataset(tmp_path / "out" / "source_val.npz")
     assert d.pressures_bar.shape == (1, 10, 3) and d.seed == 3 and d.split == "val"
-    expected = babble.make_programs(
+    expected = babble_programs(
         dataclasses.replace(CONFIG, seed=3, duration_s=1.0), [0], split="val"
     )
     np.testing.assert_array_equal(d.pressures_bar, expected)
@@ -264,9 +266,10 @@ def test_two_devices_pad_shard_and_match_c(tmp_path, xml):
 import dataclasses, numpy as np
 import mjx_arm, jax
 from mjx_arm import babble
+from mjx_arm.programs import babble_programs
 assert len(jax.devices()) == 2
 arm = mjx_arm.load(xml=open({str(tmp_path / "arm.xml")!r}).read())
-programs = babble.make_programs(babble.BabbleConfig(duration_s=1.0), np.arange(3))
+programs = babble_programs(babble.BabbleConfig(duration_s=1.0), np.arange(3))
 sharded = babble.ShardedRollout(arm)
 arr = sharded.shard(sharded.pad(programs))
 assert arr.shape[0] == 4 and [s.data.shape[0] for s in arr.addressable_shards] == [2, 2]
@@ -283,10 +286,10 @@ print("ok")
 
 
 def test_domain_flag_takes_both_or_a_list():
-    both = babble.config_from_args(babble.parse_args(["--preset", "paper"]))
+    both = babble_cli.config_from_args(babble_cli.parse_args(["--preset", "paper"]))
     assert both.domains == ("source", "constrained") and both.n_train == 50
-    aged = babble.config_from_args(
-        babble.parse_args(["--preset", "paper", "--domain", "source,aged"])
+    aged = babble_cli.config_from_args(
+        babble_cli.parse_args(["--preset", "paper", "--domain", "source,aged"])
     )
     assert aged.domains == ("source", "aged") and aged.n_train == 50
 
@@ -510,7 +513,7 @@ def test_cli_refuses_bad_options_before_simulating(argv, message, tmp_path, monk
     argv = [a.format(file=tmp_path / "file", busy=tmp_path / "busy") for a in argv]
     monkeypatch.setattr(babble, "babble", lambda *a, **k: pytest.fail("simulated first"))
     with pytest.raises(SystemExit) as exit_:
-        babble.main(argv)
+        babble_cli.main(argv)
     assert exit_.value.code == 2  # an argparse usage error
     err = capsys.readouterr().err
     assert "usage: python -m mjx_arm.babble" in err and re.search(message, err), err
@@ -519,7 +522,7 @@ def test_cli_refuses_bad_options_before_simulating(argv, message, tmp_path, monk
 
 
 def test_cli_help_shows_every_option_with_its_default():
-    parser = babble.build_parser()
+    parser = babble_cli.build_parser()
     text = " ".join(parser.format_help().split())
     assert parser.prog == "python -m mjx_arm.babble"
     for action in parser._actions:

@@ -6,13 +6,13 @@ import numpy as np
 import pytest
 
 from mjx_arm import fit, fitted
-from mjx_arm.fidelity import babble_program
+from mjx_arm.programs import held_program
 
 
 def test_fit_recovers_the_media_of_a_known_arm():
     # Targets from the MuJoCo arm itself at a known drag and constrained scale: the fit, started
     # from the physical values, must find them (stiffness and gain stay at their prior).
-    programs = babble_program(7, seconds=6.0, hold_periods=(5, 20))[None]
+    programs = held_program(7, seconds=6.0, hold_periods=(5, 20))[None]
     data = {d: {"programs": programs} for d in fit.FIT_DOMAINS}
     truth = fit.initial_log() + np.log([1.0, 1.0, 1.3, 1.5])
     poses = fit.simulate(fit.params_from_log(truth), data)

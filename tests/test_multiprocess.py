@@ -26,7 +26,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from mjx_arm import ArmParams, babble, generate_xml
+from mjx_arm import ArmParams, generate_xml
+from mjx_arm.babble import cli as babble_cli
 
 ROOT = Path(__file__).resolve().parents[1]
 TIMEOUT_S = 150  # per process; the whole file takes ~25-50 s on 2 shared cores
@@ -180,7 +181,7 @@ def test_processes_that_disagree_stop_before_simulating(model, tmp_path):
 )
 def test_cli_refuses_bad_multiprocess_options(argv, message, tmp_path, capsys):
     with pytest.raises(SystemExit) as exit_:
-        babble.parse_args([*argv, "--out", str(tmp_path / "out")])
+        babble_cli.parse_args([*argv, "--out", str(tmp_path / "out")])
     assert exit_.value.code == 2
     err = capsys.readouterr().err
     assert re.search(message, err), err

@@ -49,6 +49,98 @@ def residuals(poses: np.ndarray, target: np.ndarray, w: float) -> np.ndarray:
     )
 
 
+def _batched(
+    target_poses: np.ndarray, init_program: np.ndarray, k: int, cfg: MpcConfig
+) -> tuple[bool, np.ndarray, np.ndarray]:
+    """Checks the tracker's inputs and gives them a program axis.
+
+    Returns:
+      (single: whether one program [T, ...] was given, targets [S, T, 6] (m, unit d3), init
+      [S, T, 3] (bar, not yet clipped to the valve range)).
+
+    Raises:
+      ValueError: shapes that do not match, non-finite values, or k, horizon_steps or
+        iterations below 1.
+    """
+    single = np.ndim(target_poses) == 2
+    targets = np.asarray(target_poses, np.float64)[None] if single else np.asarray(target_poses)
+    init = np.asarray(init_program, np.float64)[None] if single else np.asarray(init_program)
+    if targets.shape[:2] != init.shape[:2] or targets.shape[-1] != POSE_DIM:
+        raise ValueError(f"targets {targets.shape} and init program {init.shape} do not match")
+    if not (np.isfinite(targets).all() and np.isfinite(init).all()):
+        raise ValueError("targets and init program must be finite")
+    if k < 1 or cfg.horizon_steps < 1 or cfg.iterations < 1:
+        raise ValueError("k, horizon_steps and iterations must be positive")
+    return single, targets, init
+
+
+def _block_poses(
+    arm_c: Arm, pool: mj_rollout.Rollout, start: SimState, held: np.ndarray, k: int
+) -> np.ndarray:
+    """Poses [S, C, L, 6] (m, unit d3) at the end of each held block of candidate plans
+    [S, C, L, 3] (bar, each command held k periods), every candidate of program s from the
+    state `start` of program s ([S] states)."""
+    n_prog, n_cand = held.shape[:2]
+    rep = SimState(np.repeat(start.physics, n_cand, 0), np.repeat(start.pressure_bar, n_cand, 0))
+    flat = np.repeat(held.reshape(n_prog * n_cand, -1, 3), k, axis=1)
+    poses, _, _ = arm_c.rollout_c_from(rep, flat, pool)
+    return poses[:, k - 1 :: k].reshape(n_prog, n_cand, -1, POSE_DIM)
+
+
+#: Fractions of the Gauss-Newton step tried by the line search (0 keeps the current plan).
+LINE_STEPS = np.array([1.0, 0.5, 0.25, 0.0])
+
+
+def _gauss_newton(
+    arm_c: Arm,
+    pool: mj_rollout.Rollout,
+    state: SimState,
+    plan: np.ndarray,
+    target: np.ndarray,
+    k: int,
+    cfg: MpcConfig,
+) -> np.ndarray:
+    """One damped Gauss-Newton iteration on the plans [S, H, 3] (bar) from `state`.
+
+    The Jacobian of the residuals is taken by finite differences (one candidate per command,
+    all in one rollout call); commands at a valve limit that the cost pushes beyond it stay
+    there, and the step is the best of `LINE_STEPS` after clipping to the valve range.
+
+    Args:
+      target: [S, 1, H, 6] target poses (m, unit d3) of the planned steps.
+
+    Returns:
+      [S, H, 3] the new plans (bar).
+    """
+    lo, hi = arm_c.valve.p_min_bar, arm_c.valve.p_max_bar
+    n_prog, horizon, _ = plan.shape
+    n_var = horizon * 3
+    x = plan.reshape(n_prog, n_var)
+    # Forward differences, backward where the upper limit is near.
+    step = np.where(x + cfg.fd_step_bar > hi, -cfg.fd_step_bar, cfg.fd_step_bar)
+    cand = np.repeat(x[:, None], n_var + 1, 1)
+    cand[:, 1:] += step[:, None, :] * np.eye(n_var)[None]
+    poses = _block_poses(arm_c, pool, state, cand.reshape(n_prog, n_var + 1, horizon, 3), k)
+    r = residuals(poses, target, cfg.orientation_weight_cm_per_rad)
+    r = r.reshape(n_prog, n_var + 1, -1)
+    jac = (r[:, 1:] - r[:, :1]) / step[:, :, None]  # [S, n_var, n_res]
+    # Commands at a limit that the cost pushes beyond it stay there (active set).
+    slope = (jac @ r[:, 0, :, None])[..., 0]
+    pinned = ((x <= lo + 1e-9) & (slope > 0)) | ((x >= hi - 1e-9) & (slope < 0))
+    jac = np.where(pinned[..., None], 0.0, jac)
+    hess = jac @ jac.transpose(0, 2, 1)
+    grad = jac @ r[:, 0, :, None]
+    scale = np.trace(hess, axis1=1, axis2=2)[:, None, None] / n_var
+    eye = np.eye(n_var)[None]
+    delta = -np.linalg.solve(hess + (cfg.damping * scale + 1e-12) * eye, grad)[..., 0]
+    delta = np.where(pinned, 0.0, delta)
+    trial = np.clip(x[:, None] + LINE_STEPS[None, :, None] * delta[:, None], lo, hi)
+    poses = _block_poses(arm_c, pool, state, trial.reshape(n_prog, len(LINE_STEPS), horizon, 3), k)
+    r = residuals(poses, target, cfg.orientation_weight_cm_per_rad)
+    best = np.argmin((r**2).sum((-1, -2)), axis=1)
+    return trial[np.arange(n_prog), best].reshape(n_prog, horizon, 3)
+
+
 def track(
     arm_c: Arm,
     target_poses: np.ndarray,
@@ -72,71 +164,25 @@ def track(
       (commands [T * k, 3] or [S, T * k, 3] (bar), each held k periods; info: "cost" [T] or
       [S, T] (squared residual of the applied step), "wall_s").
     """
-    single = np.ndim(target_poses) == 2
-    targets = np.asarray(target_poses, np.float64)[None] if single else np.asarray(target_poses)
-    init = np.asarray(init_program, np.float64)[None] if single else np.asarray(init_program)
-    if targets.shape[:2] != init.shape[:2] or targets.shape[-1] != POSE_DIM:
-        raise ValueError(f"targets {targets.shape} and init program {init.shape} do not match")
-    if not (np.isfinite(targets).all() and np.isfinite(init).all()):
-        raise ValueError("targets and init program must be finite")
-    if k < 1 or cfg.horizon_steps < 1 or cfg.iterations < 1:
-        raise ValueError("k, horizon_steps and iterations must be positive")
+    single, targets, init = _batched(target_poses, init_program, k, cfg)
     n_prog, n_steps, _ = targets.shape
-    lo, hi = arm_c.valve.p_min_bar, arm_c.valve.p_max_bar
-    init = np.clip(init, lo, hi)
-    line_steps = np.array([1.0, 0.5, 0.25, 0.0])
+    init = np.clip(init, arm_c.valve.p_min_bar, arm_c.valve.p_max_bar)
     t0 = time.perf_counter()
     state = arm_c.rest_state(n_prog)
     applied = np.zeros((n_prog, n_steps, 3))
     cost = np.zeros((n_prog, n_steps))
     plan = init[:, : cfg.horizon_steps].copy()
-    nthread = os.cpu_count() or 1
     steps = range(n_steps)
     if progress:
         from tqdm import tqdm
 
         steps = tqdm(steps, desc="mpc", unit="step")
-    with mj_rollout.Rollout(nthread=nthread) as pool:
-
-        def blocks_from(start: SimState, held: np.ndarray) -> np.ndarray:
-            """Poses [S, C, L, 6] at the end of each held block of candidates [S, C, L, 3]."""
-            n_cand = held.shape[1]
-            rep = SimState(
-                np.repeat(start.physics, n_cand, 0), np.repeat(start.pressure_bar, n_cand, 0)
-            )
-            flat = np.repeat(held.reshape(n_prog * n_cand, -1, 3), k, axis=1)
-            poses, _, _ = arm_c.rollout_c_from(rep, flat, pool)
-            return poses[:, k - 1 :: k].reshape(n_prog, n_cand, -1, POSE_DIM)
-
+    with mj_rollout.Rollout(nthread=os.cpu_count() or 1) as pool:
         for n in steps:
             horizon = plan.shape[1]
             target = targets[:, None, n : n + horizon]
-            n_var = horizon * 3
             for _ in range(cfg.iterations):
-                x = plan.reshape(n_prog, n_var)
-                # Forward differences, backward where the upper limit is near.
-                step = np.where(x + cfg.fd_step_bar > hi, -cfg.fd_step_bar, cfg.fd_step_bar)
-                cand = np.repeat(x[:, None], n_var + 1, 1)
-                cand[:, 1:] += step[:, None, :] * np.eye(n_var)[None]
-                poses = blocks_from(state, cand.reshape(n_prog, n_var + 1, horizon, 3))
-                r = residuals(poses, target, cfg.orientation_weight_cm_per_rad)
-                r = r.reshape(n_prog, n_var + 1, -1)
-                jac = (r[:, 1:] - r[:, :1]) / step[:, :, None]  # [S, n_var, n_res]
-                # Commands at a limit that the cost pushes beyond it stay there (active set).
-                slope = (jac @ r[:, 0, :, None])[..., 0]
-                pinned = ((x <= lo + 1e-9) & (slope > 0)) | ((x >= hi - 1e-9) & (slope < 0))
-                jac = np.where(pinned[..., None], 0.0, jac)
-                hess = jac @ jac.transpose(0, 2, 1)
-                grad = jac @ r[:, 0, :, None]
-                scale = np.trace(hess, axis1=1, axis2=2)[:, None, None] / n_var
-                eye = np.eye(n_var)[None]
-                delta = -np.linalg.solve(hess + (cfg.damping * scale + 1e-12) * eye, grad)[..., 0]
-                delta = np.where(pinned, 0.0, delta)
-                trial = np.clip(x[:, None] + line_steps[None, :, None] * delta[:, None], lo, hi)
-                poses = blocks_from(state, trial.reshape(n_prog, len(line_steps), horizon, 3))
-                r = residuals(poses, target, cfg.orientation_weight_cm_per_rad)
-                best = np.argmin((r**2).sum((-1, -2)), axis=1)
-                plan = trial[np.arange(n_prog), best].reshape(n_prog, horizon, 3)
+                plan = _gauss_newton(arm_c, pool, state, plan, target, k, cfg)
             first = np.repeat(plan[:, :1], k, axis=1)
             poses, _, state = arm_c.rollout_c_from(state, first, pool)
             applied[:, n] = plan[:, 0]

@@ -90,6 +90,125 @@ def start_commands(
     return held_lib.stretch(source_programs, k)
 
 
+def _batched(
+    target_poses: np.ndarray, init_commands: np.ndarray, k: int, held
+) -> tuple[bool, np.ndarray, np.ndarray, np.ndarray]:
+    """Checks the oracle's inputs and gives them a program axis.
+
+    Returns:
+      (single: whether one program [T, ...] was given, targets [S, T, 6] (m, unit d3), inits
+      [S, T * k, 3] (bar), held [S] bools).
+
+    Raises:
+      ValueError: the shapes do not match for k, or a held program's init is not constant over
+        each source step's k periods.
+    """
+    single = np.ndim(target_poses) == 2
+    targets = np.asarray(target_poses)[None] if single else np.asarray(target_poses)
+    inits = np.asarray(init_commands)[None] if single else np.asarray(init_commands)
+    if targets.shape[0] != inits.shape[0] or inits.shape[1] != targets.shape[1] * k:
+        raise ValueError(
+            f"targets {targets.shape} and init commands {inits.shape} do not match for k = {k}"
+        )
+    held = np.broadcast_to(np.asarray(held, bool), inits.shape[:1])
+    blocks = inits[held].reshape(-1, targets.shape[1], k, inits.shape[-1])
+    if not np.allclose(blocks, blocks[:, :, :1]):
+        raise ValueError(
+            "a held program's init commands must be constant over each step's k periods"
+        )
+    return single, targets, inits, held
+
+
+def _adam_step(arm_c, targets: np.ndarray, held: np.ndarray, k: int, cfg: OracleConfig):
+    """The oracle's jitted Adam step and the map from logits to commands.
+
+    Commands are p_min + (p_max - p_min) * sigmoid(z), so every iterate stays in the valve
+    range; a program's loss is inf once its rollout diverges.
+
+    Args:
+      arm_c: the D_c arm.
+      targets: [S, T, 6] target poses (m, unit d3).
+      held: [S] bools: programs whose gradient is summed over each source step's k periods.
+      k: control periods per source step.
+      cfg: oracle settings (learning rate, orientation weight).
+
+    Returns:
+      (update: jitted (z [S, T * k, 3], opt_state) -> (new z, new opt_state, [S] loss of z),
+      opt: the optax transformation, commands_of: z -> [S, T * k, 3] commands (bar)).
+    """
+    import jax
+    import jax.numpy as jnp
+    import optax
+
+    lo, hi = arm_c.valve.p_min_bar, arm_c.valve.p_max_bar
+    target = jnp.asarray(targets, dtype=jnp.float32)
+    rollout = jax.vmap(arm_c.rollout_fn(), in_axes=(None, 0))
+    mjx_model = arm_c.mjx_model
+    w = cfg.orientation_weight_cm_per_rad
+    held_mask = jnp.asarray(held)[:, None, None]
+
+    def project(grad):
+        """Held programs' gradients [S, T * k, 3] summed over each step's k periods."""
+        per_step = grad.reshape(grad.shape[0], -1, k, grad.shape[-1]).sum(2)
+        return jnp.where(held_mask, jnp.repeat(per_step, k, axis=1), grad)
+
+    def commands_of(z):
+        return lo + (hi - lo) * jax.nn.sigmoid(z)
+
+    def losses_of(z):
+        """[S] loss of each program."""
+        poses, ok = rollout(mjx_model, commands_of(z))
+        loss = metrics.tracking_loss(poses[:, k - 1 :: k], target, w)
+        return jnp.where(ok[:, -1], loss, jnp.inf)
+
+    # The step size is state, not a constant of the compiled step: one compilation (and the
+    # persistent cache) serves every learning rate.
+    opt = optax.inject_hyperparams(optax.adam)(learning_rate=cfg.learning_rate)
+
+    @jax.jit
+    def update(z, opt_state):
+        # The programs are independent: pulling back ones gives each its own gradient.
+        loss, pullback = jax.vjp(losses_of, z)
+        (grad,) = pullback(jnp.ones_like(loss))
+        grad = project(grad)
+        updates, opt_state = opt.update(grad, opt_state, z)
+        return optax.apply_updates(z, updates), opt_state, loss
+
+    return update, opt, commands_of
+
+
+def _best_iterates(update, opt, z0, steps: int, progress: bool):
+    """Runs `steps` Adam steps from logits z0 [S, T * k, 3] and keeps each program's best.
+
+    Returns:
+      (best_z [S, T * k, 3], best_loss [S] (the lowest loss of any iterate; inf if none was
+      finite), history: list of [S] losses of each iterate before its update, step_wall_s: list
+      of seconds per step, the first including compilation).
+    """
+    import jax.numpy as jnp
+
+    z, opt_state = z0, opt.init(z0)
+    best_z, best_loss, history, step_wall_s = z0, np.full(z0.shape[0], np.inf), [], []
+    bar = tqdm(
+        range(steps),
+        desc="oracle Adam steps (the 1st compiles)",
+        unit="step",
+        disable=not progress,
+    )
+    for _ in bar:
+        t_step = time.perf_counter()
+        new_z, opt_state, loss = update(z, opt_state)
+        loss = np.asarray(loss)  # the loss of z, before this update
+        step_wall_s.append(time.perf_counter() - t_step)
+        history.append(loss)
+        better = loss < best_loss
+        best_z = jnp.where(jnp.asarray(better)[:, None, None], z, best_z)
+        best_loss = np.where(better, loss, best_loss)
+        z = new_z
+        bar.set_postfix(best_loss_max=f"{best_loss.max():.4g}", refresh=False)
+    return best_z, best_loss, history, step_wall_s
+
+
 def oracle_commands(
     arm_c,
     target_poses: np.ndarray,
@@ -128,81 +247,17 @@ def oracle_commands(
       (the loss of each iterate), "best_loss" (float or [S]), "wall_s", "step_wall_s" (per
       Adam step; the first includes compiling)).
     """
-    import jax
     import jax.numpy as jnp
-    import optax
 
-    single = np.ndim(target_poses) == 2
-    targets = np.asarray(target_poses)[None] if single else np.asarray(target_poses)
-    inits = np.asarray(init_commands)[None] if single else np.asarray(init_commands)
-    if targets.shape[0] != inits.shape[0] or inits.shape[1] != targets.shape[1] * k:
-        raise ValueError(
-            f"targets {targets.shape} and init commands {inits.shape} do not match for k = {k}"
-        )
-    held = np.broadcast_to(np.asarray(held, bool), inits.shape[:1])
-    blocks = inits[held].reshape(-1, targets.shape[1], k, inits.shape[-1])
-    if not np.allclose(blocks, blocks[:, :, :1]):
-        raise ValueError(
-            "a held program's init commands must be constant over each step's k periods"
-        )
+    single, targets, inits, held = _batched(target_poses, init_commands, k, held)
     lo, hi = arm_c.valve.p_min_bar, arm_c.valve.p_max_bar
     # Inits at a valve limit start just inside it (the sigmoid never reaches its ends); Adam's
     # normalised steps move them out again however flat the sigmoid is there.
     frac = np.clip((inits - lo) / (hi - lo), 1e-4, 1 - 1e-4)
     z0 = jnp.asarray(np.log(frac / (1 - frac)), dtype=jnp.float32)
-    target = jnp.asarray(targets, dtype=jnp.float32)
-    rollout = jax.vmap(arm_c.rollout_fn(), in_axes=(None, 0))
-    mjx_model = arm_c.mjx_model
-    w = cfg.orientation_weight_cm_per_rad
-    held_mask = jnp.asarray(held)[:, None, None]
-
-    def project(grad):
-        """Held programs' gradients [S, T * k, 3] summed over each step's k periods."""
-        per_step = grad.reshape(grad.shape[0], -1, k, grad.shape[-1]).sum(2)
-        return jnp.where(held_mask, jnp.repeat(per_step, k, axis=1), grad)
-
-    def commands_of(z):
-        return lo + (hi - lo) * jax.nn.sigmoid(z)
-
-    def losses_of(z):
-        """[S] loss of each program."""
-        poses, ok = rollout(mjx_model, commands_of(z))
-        loss = metrics.tracking_loss(poses[:, k - 1 :: k], target, w)
-        return jnp.where(ok[:, -1], loss, jnp.inf)
-
-    # The step size is state, not a constant of the compiled step: one compilation (and the
-    # persistent cache) serves every learning rate.
-    opt = optax.inject_hyperparams(optax.adam)(learning_rate=cfg.learning_rate)
-
-    @jax.jit
-    def update(z, opt_state):
-        # The programs are independent: pulling back ones gives each its own gradient.
-        loss, pullback = jax.vjp(losses_of, z)
-        (grad,) = pullback(jnp.ones_like(loss))
-        grad = project(grad)
-        updates, opt_state = opt.update(grad, opt_state, z)
-        return optax.apply_updates(z, updates), opt_state, loss
-
+    update, opt, commands_of = _adam_step(arm_c, targets, held, k, cfg)
     t0 = time.perf_counter()
-    z, opt_state = z0, opt.init(z0)
-    best_z, best_loss, history, step_wall_s = z0, np.full(z0.shape[0], np.inf), [], []
-    steps = tqdm(
-        range(cfg.steps),
-        desc="oracle Adam steps (the 1st compiles)",
-        unit="step",
-        disable=not progress,
-    )
-    for _ in steps:
-        t_step = time.perf_counter()
-        new_z, opt_state, loss = update(z, opt_state)
-        loss = np.asarray(loss)  # the loss of z, before this update
-        step_wall_s.append(time.perf_counter() - t_step)
-        history.append(loss)
-        better = loss < best_loss
-        best_z = jnp.where(jnp.asarray(better)[:, None, None], z, best_z)
-        best_loss = np.where(better, loss, best_loss)
-        z = new_z
-        steps.set_postfix(best_loss_max=f"{best_loss.max():.4g}", refresh=False)
+    best_z, best_loss, history, step_wall_s = _best_iterates(update, opt, z0, cfg.steps, progress)
     commands = np.asarray(commands_of(best_z), dtype=np.float64)
     history = np.asarray(history).reshape(len(history), z0.shape[0])
     info = {

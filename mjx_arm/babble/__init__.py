@@ -6,12 +6,14 @@ different times, so the programs visit the whole pressure cube and hence the wor
 trajectory starts from the arm's rest state (the paper resets the arm between trajectories).
 
 Programs are reproducible: trajectory i of a (domain, split) stream is drawn by a NumPy
-Generator seeded with ``[seed, stream_id(domain, split), i]``, so it does not depend on the batch,
-chunk, backend or device count. (NumPy rather than jax.random: each new batch shape would cost a
-JAX compilation of seconds on a small CPU, and the programs are a negligible cost.)
+Generator seeded with ``[seed, stream_id(domain, split), i]`` (`mjx_arm.programs.babble_programs`,
+the programs' one home), so it does not depend on the batch, chunk, backend or device count.
+(NumPy rather than jax.random: each new batch shape would cost a JAX compilation of seconds on a
+small CPU, and the programs are a negligible cost.)
 
-Command line (writes ``<out>/<domain>_<split>.npz`` and ``<out>/manifest.json`` as a whole folder,
-replacing an earlier run's folder only once every file is written; see `mjx_arm.dataset`)::
+Command line (`mjx_arm.babble.cli`; writes ``<out>/<domain>_<split>.npz`` and
+``<out>/manifest.json`` as a whole folder, replacing an earlier run's folder only once every file
+is written; see `mjx_arm.dataset`)::
 
     python -m mjx_arm.babble --preset paper --out data/babble          # 50 + 3 x 60 s, both domains
     python -m mjx_arm.babble --domain source --n 1000 --duration 10 --chunk 4096 --backend mjx
@@ -41,15 +43,11 @@ for bit, a one-process run over as many devices (tests/test_multiprocess.py, doc
 
 from __future__ import annotations
 
-import argparse
 import copy
 import dataclasses
 import functools
 import json
 import math
-import os
-import sys
-import time
 import zlib
 from collections.abc import Callable, Sequence
 from pathlib import Path
@@ -63,7 +61,8 @@ from jax.sharding import PartitionSpec as P
 from mujoco import mjx
 
 from mjx_arm import arm as arm_lib
-from mjx_arm import constants, dataset, domains, machine
+from mjx_arm import constants, dataset, domains
+from mjx_arm.programs import babble_programs
 
 BACKENDS = ("auto", "mjx", "c")
 #: Largest MuJoCo C batch per call, `Arm.rollout`'s own (see `mjx_arm.arm.C_CHUNK`).
@@ -72,7 +71,10 @@ C_MAX_CHUNK = arm_lib.C_CHUNK
 
 @dataclasses.dataclass(frozen=True)
 class BabbleConfig:
-    """Options of a babbling run. Defaults are the paper's (50 + 3 trajectories of 60 s)."""
+    """Options of a babbling run. Defaults are the paper's (50 + 3 trajectories of 60 s).
+
+    Its program fields make it the `mjx_arm.programs.BabbleSpec` that `babble_programs` draws
+    from."""
 
     seed: int = 0
     """Root seed of every pressure program."""
@@ -135,48 +137,6 @@ class BabbleConfig:
 
 #: The paper's data: 50 training and 3 validation trajectories of 60 s in each domain.
 PAPER = BabbleConfig()
-
-
-# ---------------------------------------------------------------------------------- programs
-
-
-def stream_id(domain: str, split: str) -> int:
-    """A stable 31-bit id of a (domain, split) random stream."""
-    return zlib.crc32(f"{domain}/{split}".encode()) & 0x7FFFFFFF
-
-
-def program(rng: np.random.Generator, config: BabbleConfig) -> np.ndarray:
-    """One program [T, 3] (bar, float32): per-chamber random targets held for random durations."""
-    n_steps, lo, hi = config.n_steps, config.hold_min_steps, config.hold_max_steps
-    n_holds = n_steps // lo + 1  # enough holds to cover T even if every one is the shortest
-    holds = rng.integers(lo, hi + 1, size=(3, n_holds))
-    targets = rng.uniform(config.p_low_bar, config.p_high_bar, size=(3, n_holds))
-    steps = np.arange(n_steps)
-    which = np.stack([np.searchsorted(end, steps, side="right") for end in holds.cumsum(1)])
-    return np.take_along_axis(targets, which, axis=1).T.astype(np.float32)
-
-
-def make_programs(
-    config: BabbleConfig, indices, *, domain: str = "source", split: str = "train"
-) -> np.ndarray:
-    """Babbling programs of the given trajectory indices.
-
-    Trajectory i draws from ``np.random.default_rng([seed, stream_id(domain, split), i])``, so it
-    is the same whatever else is generated with it.
-
-    Args:
-      config: babbling options (seed, duration, pressure range, hold durations).
-      indices: [B] int trajectory indices (>= 0) within the (domain, split) stream.
-      domain, split: name the random stream.
-
-    Returns:
-      [B, T, 3] float32 chamber commands (bar), T = config.n_steps.
-    """
-    stream = stream_id(domain, split)
-    out = np.empty((len(indices), config.n_steps, 3), np.float32)
-    for row, i in enumerate(indices):
-        out[row] = program(np.random.default_rng([config.seed, stream, int(i)]), config)
-    return out
 
 
 # ---------------------------------------------------------------------------------- rollouts
@@ -429,7 +389,7 @@ def babble(
             sharded = ShardedRollout(arm) if backend == "mjx" else None
             for split, n in splits.items():
                 bar.set_postfix_str(f"{domain}/{split}")
-                programs = make_programs(config, np.arange(n), domain=domain, split=split)
+                programs = babble_programs(config, np.arange(n), domain=domain, split=split)
                 _check_processes_agree(config, backend, arm, programs)
                 poses = simulate(
                     arm,
@@ -517,228 +477,3 @@ def run(
         return []
     named = {dataset_path(out_dir, d.domain, d.split).name: d for d in datasets}
     return dataset.save_folder(out_dir, named)
-
-
-# ---------------------------------------------------------------------------------- command line
-
-
-def _int_at_least(low: int):
-    def parse(text: str) -> int:
-        try:
-            value = int(text)
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"not a whole number: {text!r}") from None
-        if value < low:
-            raise argparse.ArgumentTypeError(f"must be >= {low}, got {value}")
-        return value
-
-    return parse
-
-
-def _positive_seconds(text: str) -> float:
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"not a number: {text!r}") from None
-    if not math.isfinite(value) or value <= 0:
-        raise argparse.ArgumentTypeError(f"must be a finite number of seconds > 0, got {text}")
-    return value
-
-
-class _HelpFormatter(argparse.ArgumentDefaultsHelpFormatter):
-    """Shows every default, except None ones: their help says what None means."""
-
-    def _get_help_string(self, action):
-        if action.default is None:
-            return action.help
-        return super()._get_help_string(action)
-
-
-def build_parser() -> argparse.ArgumentParser:
-    """The command line of ``python -m mjx_arm.babble``; defaults are the paper's (`PAPER`)."""
-    p = argparse.ArgumentParser(
-        prog="python -m mjx_arm.babble",
-        description="Simulate pseudo-random pressure programs and save babbling datasets"
-        " (one folder per run: <domain>_<split>.npz files and manifest.json).",
-        formatter_class=_HelpFormatter,
-    )
-    p.add_argument(
-        "--preset", choices=["paper"], help="paper: 50 + 3 x 60 s in both domains (the defaults)"
-    )
-    p.add_argument(
-        "--domain",
-        default="both",
-        help=f"{', '.join(domains.DOMAINS)}, both (= source,constrained) or a comma list such as"
-        " source,aged (one shared task-space normalisation over the listed domains)",
-    )
-    p.add_argument(
-        "--n", type=_int_at_least(0), default=PAPER.n_train, help="training trajectories per domain"
-    )
-    p.add_argument(
-        "--n-val",
-        type=_int_at_least(0),
-        default=PAPER.n_val,
-        help="validation trajectories per domain",
-    )
-    p.add_argument(
-        "--duration",
-        type=_positive_seconds,
-        default=PAPER.duration_s,
-        help="seconds per trajectory",
-    )
-    p.add_argument(
-        "--seed", type=_int_at_least(0), default=PAPER.seed, help="root seed of the programs"
-    )
-    p.add_argument(
-        "--hold-min", type=_positive_seconds, default=PAPER.hold_min_s, help="shortest hold (s)"
-    )
-    p.add_argument(
-        "--hold-max", type=_positive_seconds, default=PAPER.hold_max_s, help="longest hold (s)"
-    )
-    p.add_argument(
-        "--backend",
-        choices=BACKENDS,
-        default=PAPER.backend,
-        help="mjx, c (MuJoCo C on all cores) or auto (c when JAX runs on the CPU)",
-    )
-    p.add_argument(
-        "--chunk",
-        type=_int_at_least(1),
-        default=PAPER.chunk,
-        help=f"trajectories per device call (MuJoCo C: at most {C_MAX_CHUNK})",
-    )
-    p.add_argument("--model", help="MJCF file (default: the committed models/softarm.xml)")
-    p.add_argument(
-        "--out",
-        default="out/babble",
-        help="output folder, written as a whole; an earlier run's folder is replaced",
-    )
-    p.add_argument(
-        "--distributed",
-        action="store_true",
-        help="one process of a multi-process run: call jax.distributed.initialize() (with the"
-        " three options below, or from SLURM / Open MPI / JAX_COORDINATOR_ADDRESS)",
-    )
-    p.add_argument(
-        "--coordinator",
-        metavar="HOST:PORT",
-        help="with --distributed: process 0's address, the same on every process (default:"
-        " JAX_COORDINATOR_ADDRESS or the cluster's)",
-    )
-    p.add_argument(
-        "--num-processes",
-        type=_int_at_least(1),
-        help="with --distributed: processes in the run (default: the cluster's)",
-    )
-    p.add_argument(
-        "--process-id",
-        type=_int_at_least(0),
-        help="with --distributed: this process's index, 0 .. num-processes - 1; process 0 writes"
-        " --out (default: the cluster's)",
-    )
-    p.add_argument(
-        "--cache-dir",
-        help="JAX persistent compilation cache folder (default on an accelerator:"
-        " ~/.cache/softarm/jax, see mjx_arm.machine.enable_compilation_cache)",
-    )
-    p.add_argument("--no-progress", action="store_true", help="hide the simulation progress bar")
-    return p
-
-
-def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
-    """Parses and checks the command line before any work: a bad option, an inconsistent
-    configuration, a missing model or an unusable output folder is a usage error (exit 2).
-
-    Returns:
-      The namespace, with the checked `BabbleConfig` as ``config``.
-    """
-    p = build_parser()
-    args = p.parse_args(argv)
-    try:
-        args.config = config_from_args(args)
-    except ValueError as err:
-        p.error(str(err))
-    try:
-        check_distributed_args(args)
-    except ValueError as err:
-        p.error(str(err))
-    if args.model is not None and not Path(args.model).is_file():
-        p.error(f"--model {args.model}: no such MJCF file")
-    try:
-        dataset.check_output_folder(args.out)
-    except OSError as err:
-        p.error(f"--out: {err}")
-    return args
-
-
-def check_distributed_args(args: argparse.Namespace) -> None:
-    """Raises ValueError unless the multi-process options are consistent."""
-    given = [
-        f"--{name.replace('_', '-')}"
-        for name in ("coordinator", "num_processes", "process_id")
-        if getattr(args, name) is not None
-    ]
-    if given and not args.distributed:
-        raise ValueError(f"{' and '.join(given)}: only with --distributed")
-    if args.coordinator is not None:
-        host, _, port = args.coordinator.rpartition(":")
-        if not host or not port.isdigit() or not 0 < int(port) < 65536:
-            raise ValueError(f"--coordinator must be HOST:PORT, got {args.coordinator!r}")
-    if (args.num_processes is None) != (args.process_id is None):
-        raise ValueError("give --num-processes and --process-id together")
-    if args.process_id is not None and args.process_id >= args.num_processes:
-        raise ValueError(
-            f"--process-id must be < --num-processes ({args.num_processes}), got {args.process_id}"
-        )
-
-
-def config_from_args(args: argparse.Namespace) -> BabbleConfig:
-    """Builds the BabbleConfig of parsed arguments (their defaults are `PAPER`'s).
-
-    Raises:
-      ValueError: the options are inconsistent (e.g. a domain twice, holds min > max).
-    """
-    names = ("source", "constrained") if args.domain == "both" else args.domain.split(",")
-    return dataclasses.replace(
-        PAPER,
-        seed=args.seed,
-        n_train=args.n,
-        n_val=args.n_val,
-        duration_s=args.duration,
-        hold_min_s=args.hold_min,
-        hold_max_s=args.hold_max,
-        domains=tuple(name.strip() for name in names),
-        backend=args.backend,
-        chunk=args.chunk,
-    )
-
-
-def main(argv: Sequence[str] | None = None) -> int:
-    args = parse_args(argv)
-    if args.distributed:
-        # Cross-process collectives on the CPU: jax 0.10.2's default, set in case another is.
-        if not os.environ.get("JAX_CPU_COLLECTIVES_IMPLEMENTATION"):
-            jax.config.update("jax_cpu_collectives_implementation", "gloo")
-        jax.distributed.initialize(
-            coordinator_address=args.coordinator,
-            num_processes=args.num_processes,
-            process_id=args.process_id,
-        )
-    machine.enable_compilation_cache(args.cache_dir or None)
-    start = time.perf_counter()
-    paths = run(args.config, args.out, model_path=args.model, progress=not args.no_progress)
-    for path in paths:
-        print(path)
-    if paths:
-        summary = {
-            "seconds": round(time.perf_counter() - start, 2),
-            "processes": jax.process_count(),
-            "devices": jax.device_count(),
-            "files": [str(p) for p in paths],
-        }
-        print(json.dumps(summary))
-    return 0
-
-
-if __name__ == "__main__":
-    sys.exit(main())

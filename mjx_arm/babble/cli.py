@@ -1,0 +1,262 @@
+"""The command line of ``python -m mjx_arm.babble``: parse and check the options, then `run`.
+
+Every option is checked before any simulation (a bad value, an inconsistent configuration, a
+missing model or an unusable output folder is a usage error, exit 2); defaults are the paper's
+(`mjx_arm.babble.PAPER`). The library (`mjx_arm.babble`) does not import this module, so
+``python -m mjx_arm.babble`` (the package's ``__main__``) imports each module once.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import json
+import math
+import os
+import time
+from collections.abc import Sequence
+from pathlib import Path
+
+import jax
+
+from mjx_arm import dataset, domains, machine
+from mjx_arm.babble import BACKENDS, C_MAX_CHUNK, PAPER, BabbleConfig, run
+
+
+def _int_at_least(low: int):
+    def parse(text: str) -> int:
+        try:
+            value = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"not a whole number: {text!r}") from None
+        if value < low:
+            raise argparse.ArgumentTypeError(f"must be >= {low}, got {value}")
+        return value
+
+    return parse
+
+
+def _positive_seconds(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not a number: {text!r}") from None
+    if not math.isfinite(value) or value <= 0:
+        raise argparse.ArgumentTypeError(f"must be a finite number of seconds > 0, got {text}")
+    return value
+
+
+class _HelpFormatter(argparse.ArgumentDefaultsHelpFormatter):
+    """Shows every default, except None ones: their help says what None means."""
+
+    def _get_help_string(self, action):
+        if action.default is None:
+            return action.help
+        return super()._get_help_string(action)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The command line of ``python -m mjx_arm.babble``; defaults are the paper's (`PAPER`)."""
+    p = argparse.ArgumentParser(
+        prog="python -m mjx_arm.babble",
+        description="Simulate pseudo-random pressure programs and save babbling datasets"
+        " (one folder per run: <domain>_<split>.npz files and manifest.json).",
+        formatter_class=_HelpFormatter,
+    )
+    _add_program_options(p)
+    _add_run_options(p)
+    _add_distributed_options(p)
+    p.add_argument(
+        "--cache-dir",
+        help="JAX persistent compilation cache folder (default on an accelerator:"
+        " ~/.cache/softarm/jax, see mjx_arm.machine.enable_compilation_cache)",
+    )
+    p.add_argument("--no-progress", action="store_true", help="hide the simulation progress bar")
+    return p
+
+
+def _add_program_options(p: argparse.ArgumentParser) -> None:
+    """What to babble: domains, trajectories, their length, seed and holds."""
+    p.add_argument(
+        "--preset", choices=["paper"], help="paper: 50 + 3 x 60 s in both domains (the defaults)"
+    )
+    p.add_argument(
+        "--domain",
+        default="both",
+        help=f"{', '.join(domains.DOMAINS)}, both (= source,constrained) or a comma list such as"
+        " source,aged (one shared task-space normalisation over the listed domains)",
+    )
+    p.add_argument(
+        "--n", type=_int_at_least(0), default=PAPER.n_train, help="training trajectories per domain"
+    )
+    p.add_argument(
+        "--n-val",
+        type=_int_at_least(0),
+        default=PAPER.n_val,
+        help="validation trajectories per domain",
+    )
+    p.add_argument(
+        "--duration",
+        type=_positive_seconds,
+        default=PAPER.duration_s,
+        help="seconds per trajectory",
+    )
+    p.add_argument(
+        "--seed", type=_int_at_least(0), default=PAPER.seed, help="root seed of the programs"
+    )
+    p.add_argument(
+        "--hold-min", type=_positive_seconds, default=PAPER.hold_min_s, help="shortest hold (s)"
+    )
+    p.add_argument(
+        "--hold-max", type=_positive_seconds, default=PAPER.hold_max_s, help="longest hold (s)"
+    )
+
+
+def _add_run_options(p: argparse.ArgumentParser) -> None:
+    """How and where: backend, batch size, model and output folder."""
+    p.add_argument(
+        "--backend",
+        choices=BACKENDS,
+        default=PAPER.backend,
+        help="mjx, c (MuJoCo C on all cores) or auto (c when JAX runs on the CPU)",
+    )
+    p.add_argument(
+        "--chunk",
+        type=_int_at_least(1),
+        default=PAPER.chunk,
+        help=f"trajectories per device call (MuJoCo C: at most {C_MAX_CHUNK})",
+    )
+    p.add_argument("--model", help="MJCF file (default: the committed models/softarm.xml)")
+    p.add_argument(
+        "--out",
+        default="out/babble",
+        help="output folder, written as a whole; an earlier run's folder is replaced",
+    )
+
+
+def _add_distributed_options(p: argparse.ArgumentParser) -> None:
+    """One process of a multi-process run (`jax.distributed.initialize`)."""
+    p.add_argument(
+        "--distributed",
+        action="store_true",
+        help="one process of a multi-process run: call jax.distributed.initialize() (with the"
+        " three options below, or from SLURM / Open MPI / JAX_COORDINATOR_ADDRESS)",
+    )
+    p.add_argument(
+        "--coordinator",
+        metavar="HOST:PORT",
+        help="with --distributed: process 0's address, the same on every process (default:"
+        " JAX_COORDINATOR_ADDRESS or the cluster's)",
+    )
+    p.add_argument(
+        "--num-processes",
+        type=_int_at_least(1),
+        help="with --distributed: processes in the run (default: the cluster's)",
+    )
+    p.add_argument(
+        "--process-id",
+        type=_int_at_least(0),
+        help="with --distributed: this process's index, 0 .. num-processes - 1; process 0 writes"
+        " --out (default: the cluster's)",
+    )
+
+
+def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
+    """Parses and checks the command line before any work: a bad option, an inconsistent
+    configuration, a missing model or an unusable output folder is a usage error (exit 2).
+
+    Returns:
+      The namespace, with the checked `BabbleConfig` as ``config``.
+    """
+    p = build_parser()
+    args = p.parse_args(argv)
+    try:
+        args.config = config_from_args(args)
+    except ValueError as err:
+        p.error(str(err))
+    try:
+        check_distributed_args(args)
+    except ValueError as err:
+        p.error(str(err))
+    if args.model is not None and not Path(args.model).is_file():
+        p.error(f"--model {args.model}: no such MJCF file")
+    try:
+        dataset.check_output_folder(args.out)
+    except OSError as err:
+        p.error(f"--out: {err}")
+    return args
+
+
+def check_distributed_args(args: argparse.Namespace) -> None:
+    """Raises ValueError unless the multi-process options are consistent."""
+    given = [
+        f"--{name.replace('_', '-')}"
+        for name in ("coordinator", "num_processes", "process_id")
+        if getattr(args, name) is not None
+    ]
+    if given and not args.distributed:
+        raise ValueError(f"{' and '.join(given)}: only with --distributed")
+    if args.coordinator is not None:
+        host, _, port = args.coordinator.rpartition(":")
+        if not host or not port.isdigit() or not 0 < int(port) < 65536:
+            raise ValueError(f"--coordinator must be HOST:PORT, got {args.coordinator!r}")
+    if (args.num_processes is None) != (args.process_id is None):
+        raise ValueError("give --num-processes and --process-id together")
+    if args.process_id is not None and args.process_id >= args.num_processes:
+        raise ValueError(
+            f"--process-id must be < --num-processes ({args.num_processes}), got {args.process_id}"
+        )
+
+
+def config_from_args(args: argparse.Namespace) -> BabbleConfig:
+    """Builds the BabbleConfig of parsed arguments (their defaults are `PAPER`'s).
+
+    Raises:
+      ValueError: the options are inconsistent (e.g. a domain twice, holds min > max).
+    """
+    names = ("source", "constrained") if args.domain == "both" else args.domain.split(",")
+    return dataclasses.replace(
+        PAPER,
+        seed=args.seed,
+        n_train=args.n,
+        n_val=args.n_val,
+        duration_s=args.duration,
+        hold_min_s=args.hold_min,
+        hold_max_s=args.hold_max,
+        domains=tuple(name.strip() for name in names),
+        backend=args.backend,
+        chunk=args.chunk,
+    )
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Runs ``python -m mjx_arm.babble`` with `argv` (default: sys.argv[1:]): prints each file
+    written and a JSON summary (wall seconds, processes, devices, files) on process 0.
+
+    Returns:
+      0 (exit status); a bad command line exits 2 before any work (`parse_args`).
+    """
+    args = parse_args(argv)
+    if args.distributed:
+        # Cross-process collectives on the CPU: jax 0.10.2's default, set in case another is.
+        if not os.environ.get("JAX_CPU_COLLECTIVES_IMPLEMENTATION"):
+            jax.config.update("jax_cpu_collectives_implementation", "gloo")
+        jax.distributed.initialize(
+            coordinator_address=args.coordinator,
+            num_processes=args.num_processes,
+            process_id=args.process_id,
+        )
+    machine.enable_compilation_cache(args.cache_dir or None)
+    start = time.perf_counter()
+    paths = run(args.config, args.out, model_path=args.model, progress=not args.no_progress)
+    for path in paths:
+        print(path)
+    if paths:
+        summary = {
+            "seconds": round(time.perf_counter() - start, 2),
+            "processes": jax.process_count(),
+            "devices": jax.device_count(),
+            "files": [str(p) for p in paths],
+        }
+        print(json.dumps(summary))
+    return 0
