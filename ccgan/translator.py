@@ -21,8 +21,10 @@ from ccgan.data import (
 )
 from ccgan.models import ForwardModel, Generator, forward_open_loop
 
+#: The committed translators, one folder per method (results/README.md lists them).
+TRANSLATORS_DIR = Path(__file__).resolve().parent.parent / "results" / "translators"
 #: Where `load_translator()` looks when given no path (override with $CCGAN_TRANSLATOR).
-DEFAULT_PATH = Path(__file__).resolve().parent.parent / "results" / "ccgan" / "translator.ckpt"
+DEFAULT_PATH = TRANSLATORS_DIR / "ccgan" / "translator.ckpt"
 
 #: Commands `Translator.translate` accepts (bar): the valves take [0, 3.5]; a little slack for
 #: noise, and anything further out is in other units (kPa, psi, Pa) or garbage.

@@ -9,13 +9,12 @@ Methods:
   ccgan    the trained CCGAN-GP translator `ccgan.load_translator(path)`. Every translator
            method is skipped with a note when its default checkpoint is absent; one that was
            asked for (--ccgan-path etc.) must load, or the run stops before any work.
-  ccgan_sim  the CCGAN-GP translator fine-tuned in the simulator: through the MJX rollout
-           (`ccgan.finetune`: results/ccgan_sim, ccgan_sim2, ccgan_sim3 on babbling programs,
-           ccgan_sim4, ccgan_sim5 on shape-like ones), then by imitation of `tracking.mpc`
-           (`ccgan.distill`: ccgan_sim6, ccgan_sim7, ccgan_sim8): the last stage's
-           results/ccgan_sim8/translator.ckpt or --ccgan-sim-path; not in the default methods.
+  ccgan_sim  the CCGAN-GP translator fine-tuned in the simulator (`ccgan.finetune` through the
+           MJX rollout, then `ccgan.distill` by imitation of `tracking.mpc`; docs/training.md):
+           results/translators/ccgan_sim/translator.ckpt or --ccgan-sim-path; not in the
+           default methods.
   wcgan    the WCGAN-GP baseline translator: a translator checkpoint given by --wcgan-path or
-           found at results/wcgan/translator.ckpt.
+           found at results/translators/wcgan/translator.ckpt.
   mpc      receding-horizon tracking in the D_c simulator itself (`tracking.mpc.track`, MuJoCo C,
            k = the stretch k): at every source step the next command is planned by Gauss-Newton
            on the simulated tracking error and applied. Not a translator (it needs the D_c
@@ -47,20 +46,17 @@ from pathlib import Path
 
 import numpy as np
 
+from ccgan.translator import TRANSLATORS_DIR
 from tracking.held import stretch
 
 METHODS = ("none", "stretch", "ccgan", "ccgan_sim", "wcgan", "mpc", "oracle")
 #: What runs without --methods (the oracle is left out on CPU).
 DEFAULT_METHODS = ("none", "stretch", "ccgan", "wcgan", "oracle")
 TRANSLATOR_METHODS = ("ccgan", "ccgan_sim", "wcgan")
-#: Where the simulator-fine-tuned CCGAN-GP (`ccgan.finetune`) is looked for when no path is given.
-CCGAN_SIM_DEFAULT_PATH = (
-    Path(__file__).resolve().parent.parent / "results" / "ccgan_sim8" / "translator.ckpt"
-)
+#: Where the simulator-fine-tuned CCGAN-GP is looked for when no path is given.
+CCGAN_SIM_DEFAULT_PATH = TRANSLATORS_DIR / "ccgan_sim" / "translator.ckpt"
 #: Where the WCGAN-GP baseline's translator checkpoint is looked for when no path is given.
-WCGAN_DEFAULT_PATH = (
-    Path(__file__).resolve().parent.parent / "results" / "wcgan" / "translator.ckpt"
-)
+WCGAN_DEFAULT_PATH = TRANSLATORS_DIR / "wcgan" / "translator.ckpt"
 #: The flag that gives each translator method's checkpoint, named in notes and errors.
 PATH_FLAGS = {"ccgan": "--ccgan-path", "wcgan": "--wcgan-path", "ccgan_sim": "--ccgan-sim-path"}
 

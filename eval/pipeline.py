@@ -56,8 +56,8 @@ RESULTS_DIR = "results"
 RUNS_DIR = "runs"
 #: What the report says of the arm at constants.SOLID_MODEL_PATH.
 SOLID_ARM_NOTE = (
-    "the old solid-disc arm, on which the committed translators (results/ccgan, results/wcgan,"
-    " results/ccgan_sim8) were trained"
+    "the old solid-disc arm, on which the committed translators (results/translators/) were"
+    " trained"
 )
 
 

@@ -201,21 +201,21 @@ def _add_arm_options(p: argparse.ArgumentParser) -> None:
         metavar="CKPT",
         default=None,
         help="CCGAN-GP translator checkpoint (default:"
-        " $CCGAN_TRANSLATOR, else results/ccgan/translator.ckpt, skipped if absent)",
+        " $CCGAN_TRANSLATOR, else results/translators/ccgan/translator.ckpt, skipped if absent)",
     )
     p.add_argument(
         "--wcgan-path",
         metavar="CKPT",
         default=None,
         help="WCGAN-GP translator checkpoint (default:"
-        " results/wcgan/translator.ckpt, skipped if absent)",
+        " results/translators/wcgan/translator.ckpt, skipped if absent)",
     )
     p.add_argument(
         "--ccgan-sim-path",
         metavar="CKPT",
         default=None,
         help="fine-tuned CCGAN-GP checkpoint"
-        " (default: results/ccgan_sim8/translator.ckpt, skipped if absent)",
+        " (default: results/translators/ccgan_sim/translator.ckpt, skipped if absent)",
     )
 
 

@@ -24,7 +24,7 @@ from tracking.config import ConfigError
 from tracking.oracle import OracleConfig
 
 ROOT = Path(__file__).resolve().parent.parent
-SHIPPED = ROOT / "results" / "ccgan" / "translator.ckpt"
+SHIPPED = ROOT / "results" / "translators" / "ccgan" / "translator.ckpt"
 
 
 def _file_hash(path) -> str:
