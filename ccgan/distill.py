@@ -37,13 +37,21 @@ import dataclasses
 import json
 import time
 from pathlib import Path
+from typing import Any, NamedTuple
 
 import numpy as np
 
 import mjx_arm  # noqa: F401  (before jax: sets the XLA CPU flag)
 from ccgan.cli import add_config_flags, config_from_args
 from ccgan.data import PRESSURE_DIM, normalise_pressure, samples
-from ccgan.finetune import common_k, generator_commands, keep_better, stage_parser, start_stage
+from ccgan.stage import (
+    BestIterates,
+    common_k,
+    generator_commands,
+    stage_parser,
+    start_stage,
+    validated_loop,
+)
 from ccgan.translator import Translator
 from mjx_arm.programs import shape_like_programs
 from tracking import mpc
@@ -203,6 +211,165 @@ def teacher_data(
     return data
 
 
+class ImitationData(NamedTuple):
+    """What `distill` trains and scores on: `teacher_data`'s programs as the translator sees them.
+
+    s_train [N, T, 9]: normalised samples (`ccgan.data.samples`) of the training programs;
+    c_train [N, T, 3]: the teacher's commands for them (pressures normalised to [0, 1]);
+    s_val [V, T, 9] and x_val [V, T, 6] (float64): the held-out programs' samples and D_s
+    targets; c_val [V, T, 3]: the teacher's held-out commands (bar); teacher_val_x_err_cm [V]:
+    the teacher's own held-out X_err (cm); window: control steps in window_s.
+    """
+
+    s_train: Any
+    c_train: Any
+    s_val: Any
+    x_val: np.ndarray
+    c_val: np.ndarray
+    teacher_val_x_err_cm: np.ndarray
+    window: int
+
+
+def imitation_data(
+    config: DistillConfig,
+    translator: Translator,
+    arm_s,
+    arm_c,
+    k: int,
+    cache: Path | None,
+    log=print,
+    progress=False,
+) -> ImitationData:
+    """`teacher_data` (computed, or read from `cache`), normalised with the translator's bounds."""
+    import jax.numpy as jnp
+
+    data = teacher_data(config, arm_s, arm_c, k, cache, log, progress)
+    bounds = translator.bounds
+    return ImitationData(
+        s_train=jnp.asarray(samples(data["p_train"], data["x_train"], bounds)),
+        c_train=jnp.asarray(normalise_pressure(data["c_train"]), jnp.float32),
+        s_val=jnp.asarray(samples(data["p_val"], data["x_val"], bounds)),
+        x_val=np.asarray(data["x_val"], np.float64),
+        c_val=data["c_val"],
+        teacher_val_x_err_cm=data["teacher_val_x_err_cm"],
+        window=int(round(config.window_s * mjx_arm.CONTROL_HZ)),
+    )
+
+
+def head_weights(n_steps: int, window: int, head_weight: float):
+    """[1, T, 1] weight of each step in the imitation loss: head_weight in the first `window`
+    steps, 1 after, normalised to mean 1 (so head_weight moves emphasis, not the loss scale)."""
+    import jax.numpy as jnp
+
+    step_weight = jnp.where(jnp.arange(n_steps) < window, head_weight, 1.0)
+    return (step_weight / step_weight.mean())[None, :, None]
+
+
+def init_imitation(translators: list[Translator], config: DistillConfig, data: ImitationData):
+    """(jitted Adam step, G_c parameters stacked over seeds [S, ...], their Adam state).
+
+    `step(params, opt_state, s_batch [B, T, 9], c_batch [B, T, 3]) -> (params, opt_state,
+    loss [S])`: every seed's step on one batch; the loss is the `head_weights`-weighted mean
+    squared difference of G_c's normalised pressures from the teacher's.
+    """
+    import jax
+    import jax.numpy as jnp
+    import optax
+
+    tr = translators[0]
+    step_weight = head_weights(data.s_train.shape[1], data.window, config.head_weight)
+
+    def loss_fn(g_params, s_batch, c_batch):
+        out = tr.generator.apply(g_params, s_batch)[..., :PRESSURE_DIM]
+        return jnp.mean(step_weight * (out - c_batch) ** 2)
+
+    opt = optax.adam(config.learning_rate)
+    stacked = jax.tree.map(lambda *x: jnp.stack(x), *[t.g_c_params for t in translators])
+    opt_state = jax.vmap(opt.init)(stacked)
+
+    @jax.jit
+    def step(params, opt_state, s_batch, c_batch):
+        loss, grads = jax.vmap(jax.value_and_grad(loss_fn), in_axes=(0, None, None))(
+            params, s_batch, c_batch
+        )
+        updates, opt_state = jax.vmap(opt.update)(grads, opt_state, params)
+        return optax.apply_updates(params, updates), opt_state, loss
+
+    return step, stacked, opt_state
+
+
+def window_and_whole_x_err_cm(arm_c, commands, k: int, x_val: np.ndarray, window: int):
+    """(X_err over the first `window` steps, over the whole program), cm, per leading index of
+    commands [..., B, T, 3] (bar) against the D_s targets x_val [B, T, 6].
+
+    One MuJoCo C rollout of every command held k periods; rollouts are causal, so the window's
+    poses are the whole rollout's first ones.
+    """
+    commands = np.asarray(commands, np.float64)
+    flat = commands.reshape((-1,) + commands.shape[-2:])
+    poses = run_dc(arm_c, stretch(flat, k), k, "c").reshape(commands.shape[:-1] + (6,))
+    err = position_error_cm(poses, x_val)
+    return err[..., :window].mean(axis=(-2, -1)), err.mean(axis=(-2, -1))
+
+
+def make_validation(translator: Translator, arm_c, k: int, data: ImitationData):
+    """`validate(params [S, ...]) -> {"score", "window", "whole"}`, each [S] in cm: every seed's
+    commands for the held-out programs in one jitted call, scored in one MuJoCo C batch; the
+    score is the mean of the X_err over the first window_s and over the whole program."""
+    import jax
+
+    tr = translator
+
+    @jax.jit
+    def val_commands(params):
+        return jax.vmap(lambda g: generator_commands(tr, g, data.s_val))(params)
+
+    def validate(params) -> dict:
+        head, whole = window_and_whole_x_err_cm(
+            arm_c, val_commands(params), k, data.x_val, data.window
+        )
+        return {"score": 0.5 * (whole + head), "window": head, "whole": whole}
+
+    return validate
+
+
+def _epoch(step, params, opt_state, data: ImitationData, order: np.ndarray, batch_size: int):
+    """One pass over the training programs in `order`, `batch_size` at a time (a last partial
+    batch is left out): (params, opt_state, mean loss [S]) after `init_imitation`'s steps."""
+    losses = []
+    for b in range(len(order) // batch_size):
+        pick = np.sort(order[b * batch_size : (b + 1) * batch_size])
+        params, opt_state, loss = step(params, opt_state, data.s_train[pick], data.c_train[pick])
+        losses.append(np.asarray(loss))
+    return params, opt_state, np.mean(losses, axis=0)
+
+
+def _new_history(arm_c, k: int, data: ImitationData) -> dict:
+    """The history of a distill run before its first epoch, with the teacher's own held-out
+    X_err (cm) over the whole programs and over their first window_s."""
+    teacher_whole = float(data.teacher_val_x_err_cm.mean())
+    head, _ = window_and_whole_x_err_cm(arm_c, data.c_val, k, data.x_val, data.window)
+    return {
+        "train_loss": [],
+        "val": {},
+        "teacher_val_x_err_cm": {"whole": teacher_whole, "window": float(head)},
+        "complete": False,
+    }
+
+
+def _best_of_seeds(best: BestIterates, history: dict, t0: float) -> list[dict]:
+    """Each seed's best iterate so far; fills the history's summary fields (wall time since
+    `t0`)."""
+    history.update(
+        epochs_run=len(history["train_loss"]),
+        best_epoch=best.step.tolist(),
+        val_x_err_cm_before=history["val"][0]["score"],
+        best_val_x_err_cm=best.score.tolist(),
+        wall_s=time.perf_counter() - t0,
+    )
+    return best.take(range(len(best.score)))
+
+
 def distill(
     translators: list[Translator],
     arm_s,
@@ -230,125 +397,56 @@ def distill(
       "teacher_val_x_err_cm" (whole, window), "best_epoch" [S] (0: the original was best),
       "best_val_x_err_cm" [S], "val_x_err_cm_before" [S], "wall_s").
     """
-    import jax
-    import jax.numpy as jnp
-    import optax
-    from tqdm.auto import tqdm
-
     k = common_k(translators)
     n_train = config.n_train + config.n_train_full  # >= batch_size (DistillConfig checks)
-    tr = translators[0]
     t0 = time.perf_counter()
-    data = teacher_data(config, arm_s, arm_c, k, cache, log, progress)
-    window = int(round(config.window_s * mjx_arm.CONTROL_HZ))
-    teacher_whole = float(data["teacher_val_x_err_cm"].mean())
-    s_train = jnp.asarray(samples(data["p_train"], data["x_train"], tr.bounds))
-    s_val = jnp.asarray(samples(data["p_val"], data["x_val"], tr.bounds))
-    c_train = jnp.asarray(normalise_pressure(data["c_train"]), jnp.float32)
-    x_val = np.asarray(data["x_val"], np.float64)
+    data = imitation_data(config, translators[0], arm_s, arm_c, k, cache, log, progress)
+    step, stacked, opt_state = init_imitation(translators, config, data)
+    validate = make_validation(translators[0], arm_c, k, data)
+    history = _new_history(arm_c, k, data)
 
-    n_steps = s_train.shape[1]
-    step_weight = jnp.where(jnp.arange(n_steps) < window, config.head_weight, 1.0)
-    step_weight = (step_weight / step_weight.mean())[None, :, None]
+    def validate_epoch(epoch: int, params) -> np.ndarray:
+        """Scores the parameters, adds the scores to the history; returns the [S] score."""
+        scores = validate(params)
+        history["val"][epoch] = {name: v.tolist() for name, v in scores.items()}
+        return scores["score"]
 
-    def loss_fn(g_params, s_batch, c_batch):
-        out = tr.generator.apply(g_params, s_batch)[..., :PRESSURE_DIM]
-        return jnp.mean(step_weight * (out - c_batch) ** 2)
-
-    opt = optax.adam(config.learning_rate)
-    stacked = jax.tree.map(lambda *x: jnp.stack(x), *[t.g_c_params for t in translators])
-    opt_state = jax.vmap(opt.init)(stacked)
-
-    @jax.jit
-    def step(params, opt_state, s_batch, c_batch):
-        loss, grads = jax.vmap(jax.value_and_grad(loss_fn), in_axes=(0, None, None))(
-            params, s_batch, c_batch
-        )
-        updates, opt_state = jax.vmap(opt.update)(grads, opt_state, params)
-        return optax.apply_updates(params, updates), opt_state, loss
-
-    @jax.jit
-    def val_commands(params):
-        return jax.vmap(lambda g: generator_commands(tr, g, s_val))(params)
-
-    def errors(commands) -> tuple[np.ndarray, np.ndarray]:
-        """(X_err over the first window_s, over the whole program), cm, per leading index of
-        commands [..., B, T, 3] (one MuJoCo C rollout; rollouts are causal, so the window's
-        poses are the whole rollout's first ones)."""
-        commands = np.asarray(commands, np.float64)
-        flat = commands.reshape((-1,) + commands.shape[-2:])
-        poses = run_dc(arm_c, stretch(flat, k), k, "c").reshape(commands.shape[:-1] + (6,))
-        err = position_error_cm(poses, x_val)
-        return err[..., :window].mean(axis=(-2, -1)), err.mean(axis=(-2, -1))
-
-    def validate(params) -> dict:
-        head, whole = errors(val_commands(params))
-        return {"score": 0.5 * (whole + head), "window": head, "whole": whole}
-
-    teacher_head = float(errors(data["c_val"])[0])
-    history = {
-        "train_loss": [],
-        "val": {},
-        "teacher_val_x_err_cm": {"whole": teacher_whole, "window": teacher_head},
-        "complete": False,
-    }
-    scores = validate(stacked)
-    history["val"][0] = {name: v.tolist() for name, v in scores.items()}
-    best_params, best_err = stacked, scores["score"]
-    best_epoch = np.zeros(len(translators), int)
+    best = BestIterates.start(stacked, validate_epoch(0, stacked))
+    teacher = history["teacher_val_x_err_cm"]
     log(
         f"held-out X_err (cm; mean of first {config.window_s} s and whole): before"
-        f" {np.round(best_err, 4).tolist()}; teacher: window {teacher_head:.4f}, whole"
-        f" {teacher_whole:.4f}"
+        f" {np.round(best.score, 4).tolist()}; teacher: window {teacher['window']:.4f}, whole"
+        f" {teacher['whole']:.4f}"
     )
-
-    def best_so_far() -> list[dict]:
-        """Each seed's best iterate so far; fills the history's summary fields."""
-        history.update(
-            epochs_run=len(history["train_loss"]),
-            best_epoch=best_epoch.tolist(),
-            val_x_err_cm_before=history["val"][0]["score"],
-            best_val_x_err_cm=best_err.tolist(),
-            wall_s=time.perf_counter() - t0,
-        )
-        return [
-            jax.tree.map(lambda x, s=s: np.asarray(x[s]), best_params)
-            for s in range(len(translators))
-        ]
-
     rng = np.random.default_rng(config.seed)
-    params = stacked
-    n_batches = n_train // config.batch_size
-    bar = tqdm(range(1, config.epochs + 1), disable=not progress, desc="distill", unit="epoch")
-    for epoch in bar:
+
+    def train_once(epoch: int, params, opt_state):
+        """One pass over the teacher programs in a random order."""
         order = rng.permutation(n_train)
-        losses = []
-        for b in range(n_batches):
-            pick = np.sort(order[b * config.batch_size : (b + 1) * config.batch_size])
-            params, opt_state, loss = step(params, opt_state, s_train[pick], c_train[pick])
-            losses.append(np.asarray(loss))
-        loss = np.mean(losses, axis=0)
+        params, opt_state, loss = _epoch(step, params, opt_state, data, order, config.batch_size)
         history["train_loss"].append(loss.tolist())
-        if not np.isfinite(loss).all():
-            log(f"epoch {epoch}: non-finite loss {loss}; stopping, keeping the best iterate")
-            break
-        out_of_time = config.max_wall_s > 0 and time.perf_counter() - t0 > config.max_wall_s
-        if epoch % config.eval_every == 0 or epoch == config.epochs or out_of_time:
-            scores = validate(params)
-            history["val"][epoch] = {name: v.tolist() for name, v in scores.items()}
-            better = scores["score"] < best_err
-            best_params = keep_better(best_params, params, better)
-            best_err = np.where(better, scores["score"], best_err)
-            best_epoch = np.where(better, epoch, best_epoch)
-            bar.set_postfix(loss=float(loss.mean()), val_cm=float(scores["score"].mean()))
-            if on_validation is not None:
-                on_validation(best_so_far(), history)
-        if out_of_time:
-            log(f"stopping after epoch {epoch}: max_wall_s = {config.max_wall_s} s reached")
-            break
-    bar.close()
+        return params, opt_state, loss
+
+    def report(best: BestIterates) -> None:
+        on_validation(_best_of_seeds(best, history, t0), history)
+
+    best = validated_loop(
+        config.epochs,
+        stacked,
+        opt_state,
+        best,
+        train_once,
+        validate_epoch,
+        None if on_validation is None else report,
+        config=config,
+        t0=t0,
+        desc="distill",
+        unit="epoch",
+        progress=progress,
+        log=log,
+    )
     history["complete"] = True
-    return best_so_far(), history
+    return _best_of_seeds(best, history, t0), history
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -51,20 +51,29 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
-import json
-import sys
 import time
-from pathlib import Path
+from typing import Any, NamedTuple
 
 import numpy as np
 
 import mjx_arm  # noqa: F401  (before jax: sets the XLA CPU flag)
-from ccgan import checkpoint
-from ccgan.cli import add_config_flags, check_output_dir, cli_parser, config_from_args
-from ccgan.data import PRESSURE_DIM, denormalise_pressure, samples
-from ccgan.translator import Translator, translator_from_checkpoint
+from ccgan.cli import add_config_flags, config_from_args
+from ccgan.data import PRESSURE_DIM, samples
+
+# save_finetuned and trained_model_hash stay importable from here (eval.methods, tests).
+from ccgan.stage import (  # noqa: F401
+    BestIterates,
+    common_k,
+    generator_commands,
+    save_finetuned,
+    stage_parser,
+    start_stage,
+    trained_model_hash,
+    validated_loop,
+)
+from ccgan.translator import Translator
 from mjx_arm import constants
-from mjx_arm.programs import shape_like_programs
+from mjx_arm.programs import babble_programs, shape_like_programs
 from tracking.config import ConfigError, check_fields
 from tracking.held import run_dc, stretch
 from tracking.metrics import position_error_cm, tracking_loss
@@ -169,14 +178,7 @@ def training_programs(
     from mjx_arm import babble
 
     bcfg = babble.BabbleConfig(seed=config.seed, duration_s=duration_s, n_train=n, n_val=0)
-    return babble.make_programs(bcfg, range(n), domain="finetune", split=split)
-
-
-def generator_commands(translator: Translator, g_params, samples_s):
-    """G_c's D_c commands [B, T, 3] (bar, one per source step) for normalised D_s samples
-    [B, T, 9] (`ccgan.data.samples`); differentiable in g_params."""
-    out = translator.generator.apply(g_params, samples_s)
-    return denormalise_pressure(out[..., :PRESSURE_DIM])
+    return babble_programs(bcfg, range(n), domain="finetune", split=split)
 
 
 def x_err_cm_c(arm_c, commands_bar: np.ndarray, k: int, target: np.ndarray):
@@ -190,30 +192,205 @@ def x_err_cm_c(arm_c, commands_bar: np.ndarray, k: int, target: np.ndarray):
     return float(err) if not lead else err
 
 
-def common_k(translators: list[Translator]) -> int:
-    """The hold factor k every translator shares.
+class FinetuneData(NamedTuple):
+    """The programs of a fine-tune as normalised samples (`ccgan.data.samples`, [..., 9]) and
+    their D_s targets ([..., 6]: tip xyz m, unit d3), simulated in MuJoCo C from rest.
 
-    Raises:
-      ValueError: no translators, or they disagree on k.
+    s_train [N, T, 9] (NumPy: batches are picked on the host), x_train [N, T, 6]: training
+    programs of window_s; s_val [V, T, 9], x_val [V, T, 6]: held-out ones; s_anchor [A, T_a, 9]:
+    anchor programs of anchor_s; s_long [V, T_l, 9], x_long [V, T_l, 6]: held-out programs of
+    val_long_s (0: anchor_s); window_steps: T.
     """
-    if not translators:
-        raise ValueError("need at least one translator")
-    k = translators[0].k
-    if any(t.k != k for t in translators):
-        raise ValueError(f"translators disagree on k: {[t.k for t in translators]}")
-    return k
+
+    s_train: np.ndarray
+    x_train: np.ndarray
+    s_val: Any
+    x_val: np.ndarray
+    s_anchor: Any
+    s_long: Any
+    x_long: np.ndarray
+    window_steps: int
 
 
-def keep_better(best_params, params, better: np.ndarray):
-    """Stacked parameters [M, ...]: params where better [M] is True, else best_params."""
-    import jax
+def finetune_data(config: FinetuneConfig, arm_s, bounds, log=print) -> FinetuneData:
+    """Draws every split's programs (`training_programs`) and simulates their D_s targets.
+
+    Args:
+      config: settings (program family, counts, lengths, seed).
+      arm_s: the D_s arm.
+      bounds: the translator's pose bounds, which normalise the samples.
+    """
     import jax.numpy as jnp
 
-    return jax.tree.map(
-        lambda b, p: jnp.where(better.reshape((-1,) + (1,) * (p.ndim - 1)), p, b),
-        best_params,
-        params,
+    t0 = time.perf_counter()
+    p_train = training_programs(config, config.n_train, "train")
+    p_val = training_programs(config, config.n_val, "val")
+    x_train = arm_s.rollout(p_train, backend="c")
+    x_val = arm_s.rollout(p_val, backend="c")
+    long_s = config.val_long_s or config.anchor_s
+    p_anchor = training_programs(config, config.n_anchor, "anchor", config.anchor_s)
+    p_long = training_programs(config, config.n_val, "val_long", long_s)
+    x_anchor = arm_s.rollout(p_anchor, backend="c")
+    x_long = arm_s.rollout(p_long, backend="c")
+    log(
+        f"D_s targets: {config.n_train} + {config.n_val} programs of {config.window_s} s,"
+        f" {config.n_anchor} of {config.anchor_s} s, {config.n_val} of {long_s} s"
+        f" ({time.perf_counter() - t0:.1f} s)"
     )
+    return FinetuneData(
+        s_train=samples(p_train, x_train, bounds),
+        x_train=x_train,
+        s_val=jnp.asarray(samples(p_val, x_val, bounds)),
+        x_val=x_val,
+        s_anchor=jnp.asarray(samples(p_anchor, x_anchor, bounds)),
+        s_long=jnp.asarray(samples(p_long, x_long, bounds)),
+        x_long=x_long,
+        window_steps=p_train.shape[1],
+    )
+
+
+def member_grid(n_seeds: int, config: FinetuneConfig) -> list[tuple[int, float, float]]:
+    """The members trained side by side (one vmapped batch): every seed index with every
+    learning rate and anchor weight, as (seed index, learning rate, anchor weight)."""
+    return [
+        (s, lr, aw)
+        for s in range(n_seeds)
+        for lr in config.learning_rates
+        for aw in config.anchor_weights
+    ]
+
+
+def init_members(translators: list[Translator], members, config: FinetuneConfig):
+    """(optimiser, G_c parameters stacked over members [M, ...], the optimiser state of every
+    member, anchor weights [M]).
+
+    Adam's step size is part of the optimiser state (`optax.inject_hyperparams`), one per
+    member, so every learning rate runs in the same compiled step.
+    """
+    import jax
+    import jax.numpy as jnp
+    import optax
+
+    opt = optax.inject_hyperparams(optax.adam)(learning_rate=config.learning_rates[0])
+    stacked = jax.tree.map(
+        lambda *x: jnp.stack(x), *[translators[m[0]].g_c_params for m in members]
+    )
+    opt_state = jax.vmap(opt.init)(stacked)
+    opt_state.hyperparams["learning_rate"] = jnp.asarray([m[1] for m in members], jnp.float32)
+    anchor_weights = jnp.asarray([m[2] for m in members], jnp.float32)
+    return opt, stacked, opt_state, anchor_weights
+
+
+def make_finetune_step(
+    translator: Translator, arm_c, k: int, config: FinetuneConfig, window_steps: int, opt
+):
+    """The jitted Adam step of every member at once.
+
+    `step(params, opt_state, trained, anchor_weights, s_anchor, s_batch, x_batch) -> (params,
+    opt_state, tracking loss [M] (cm^2))`, for parameters and trained parameters stacked over
+    members [M, ...], anchor weights [M], anchor samples [A, T_a, 9], a batch of samples
+    [B, T, 9] and its D_s targets [B, T, 6]. A member's loss is its tracking loss through the MJX
+    D_c rollout (each command held k periods, every k-th pose scored) plus its anchor weight times
+    the mean squared difference of its commands from the trained G_c's after the window.
+
+    The trained parameters and the anchor data are arguments, not constants folded into the
+    compiled step, so the persistent compilation cache serves every start point.
+    """
+    import jax
+    import jax.numpy as jnp
+    import optax
+
+    tr = translator
+    rollout = jax.vmap(arm_c.rollout_fn(), in_axes=(None, 0))
+    mjx_model = arm_c.mjx_model
+    w = config.orientation_weight_cm_per_rad
+
+    def loss_one(g_params, g_trained, anchor_weight, s_anchor, s_batch, x_batch):
+        """(Total loss, tracking part) for one member's parameters."""
+        commands = generator_commands(tr, g_params, s_batch)
+        poses, ok = rollout(mjx_model, jnp.repeat(commands, k, axis=-2))
+        per_program = tracking_loss(poses[:, k - 1 :: k], x_batch, w)
+        # A diverged rollout (never seen in practice) adds nothing rather than NaN.
+        tracking = jnp.where(ok[:, -1], per_program, 0.0).mean()
+        after = slice(window_steps, None)
+        drift = (
+            tr.generator.apply(g_params, s_anchor)[:, after, :PRESSURE_DIM]
+            - tr.generator.apply(g_trained, s_anchor)[:, after, :PRESSURE_DIM]
+        )
+        return tracking + anchor_weight * jnp.mean(drift**2), tracking
+
+    @jax.jit
+    def step(params, opt_state, trained, anchor_weights, s_anchor, s_batch, x_batch):
+        grad_fn = jax.value_and_grad(loss_one, has_aux=True)
+        (_, loss), grads = jax.vmap(grad_fn, in_axes=(0, 0, 0, None, None, None))(
+            params, trained, anchor_weights, s_anchor, s_batch, x_batch
+        )
+        updates, opt_state = jax.vmap(opt.update)(grads, opt_state, params)
+        return optax.apply_updates(params, updates), opt_state, loss
+
+    return step
+
+
+def make_validation(translator: Translator, arm_c, k: int, data: FinetuneData):
+    """`validate(params [M, ...]) -> (score, window programs' X_err, long programs' X_err)`, each
+    [M] in cm: every member's commands for the held-out programs in one jitted call, scored in
+    one MuJoCo C batch per program set; the score is the mean of the two."""
+    import jax
+
+    tr = translator
+
+    @jax.jit
+    def val_commands(params):
+        short = jax.vmap(lambda g: generator_commands(tr, g, data.s_val))(params)
+        long = jax.vmap(lambda g: generator_commands(tr, g, data.s_long))(params)
+        return short, long
+
+    def validate(params) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        short, long = (np.asarray(c, np.float64) for c in val_commands(params))
+        err_short = x_err_cm_c(arm_c, short, k, data.x_val)
+        err_long = x_err_cm_c(arm_c, long, k, data.x_long)
+        return 0.5 * (err_short + err_long), err_short, err_long
+
+    return validate
+
+
+def _new_history(members) -> dict:
+    """The history of a fine-tune before its first step (`finetune` documents its fields)."""
+    return {
+        "members": members,
+        "val_window_x_err_cm": [],
+        "val_long_x_err_cm": [],
+        "train_loss": [],
+        "step_wall_s": [],
+        "val_x_err_cm": {},
+        "complete": False,
+    }
+
+
+def _record_validation(history: dict, step: int, scores) -> np.ndarray:
+    """Adds one validation's scores (`make_validation`) to the history; returns the [M] score."""
+    score, err_short, err_long = scores
+    history["val_x_err_cm"][step] = score.tolist()
+    history["val_window_x_err_cm"].append(err_short.tolist())
+    history["val_long_x_err_cm"].append(err_long.tolist())
+    return score
+
+
+def _best_per_seed(best: BestIterates, members, n_seeds: int, history: dict, t0: float):
+    """Per seed, the best iterate of its member (learning rate, anchor weight) with the lowest
+    held-out score so far; fills the history's summary fields (wall time since `t0`)."""
+    pick = [
+        min((m for m, member in enumerate(members) if member[0] == s), key=lambda m: best.score[m])
+        for s in range(n_seeds)
+    ]
+    history["steps_run"] = len(history["train_loss"])
+    history["best_step"] = [int(best.step[m]) for m in pick]
+    history["best_learning_rate"] = [members[m][1] for m in pick]
+    history["best_anchor_weight"] = [members[m][2] for m in pick]
+    history["val_x_err_cm_before"] = [float(history["val_x_err_cm"][0][m]) for m in pick]
+    history["best_val_x_err_cm"] = [float(best.score[m]) for m in pick]
+    history["wall_s"] = time.perf_counter() - t0
+    return best.take(pick)
 
 
 def finetune(
@@ -243,300 +420,53 @@ def finetune(
       "best_step" [S] (0: the original was best), "best_learning_rate" [S],
       "best_anchor_weight" [S], "best_val_x_err_cm" [S], "wall_s", "step_wall_s").
     """
-    import jax
     import jax.numpy as jnp
-    import optax
-    from tqdm.auto import tqdm
 
     k = common_k(translators)
     tr = translators[0]
-    w = config.orientation_weight_cm_per_rad
-
     t0 = time.perf_counter()
-    p_train = training_programs(config, config.n_train, "train")
-    p_val = training_programs(config, config.n_val, "val")
-    x_train = arm_s.rollout(p_train, backend="c")
-    x_val = arm_s.rollout(p_val, backend="c")
-    long_s = config.val_long_s or config.anchor_s
-    p_anchor = training_programs(config, config.n_anchor, "anchor", config.anchor_s)
-    p_long = training_programs(config, config.n_val, "val_long", long_s)
-    x_anchor = arm_s.rollout(p_anchor, backend="c")
-    x_long = arm_s.rollout(p_long, backend="c")
-    log(
-        f"D_s targets: {config.n_train} + {config.n_val} programs of {config.window_s} s,"
-        f" {config.n_anchor} of {config.anchor_s} s, {config.n_val} of {long_s} s"
-        f" ({time.perf_counter() - t0:.1f} s)"
-    )
-    window_steps = p_train.shape[1]
-
-    rollout = jax.vmap(arm_c.rollout_fn(), in_axes=(None, 0))
-    mjx_model = arm_c.mjx_model
-
-    s_train = samples(p_train, x_train, tr.bounds)
-    s_val = jnp.asarray(samples(p_val, x_val, tr.bounds))
-    s_anchor = jnp.asarray(samples(p_anchor, x_anchor, tr.bounds))
-    s_long = jnp.asarray(samples(p_long, x_long, tr.bounds))
-
-    def loss_one(g_params, g_trained, anchor_weight, s_anchor, s_batch, x_batch):
-        """(Total loss, tracking part) for one member's parameters."""
-        commands = generator_commands(tr, g_params, s_batch)
-        poses, ok = rollout(mjx_model, jnp.repeat(commands, k, axis=-2))
-        per_program = tracking_loss(poses[:, k - 1 :: k], x_batch, w)
-        # A diverged rollout (never seen in practice) adds nothing rather than NaN.
-        tracking = jnp.where(ok[:, -1], per_program, 0.0).mean()
-        after = slice(window_steps, None)
-        drift = (
-            tr.generator.apply(g_params, s_anchor)[:, after, :PRESSURE_DIM]
-            - tr.generator.apply(g_trained, s_anchor)[:, after, :PRESSURE_DIM]
-        )
-        return tracking + anchor_weight * jnp.mean(drift**2), tracking
-
-    # Members: every seed with every learning rate and anchor weight, trained side by side (one
-    # vmapped batch).
-    members = [
-        (s, lr, aw)
-        for s in range(len(translators))
-        for lr in config.learning_rates
-        for aw in config.anchor_weights
-    ]
-    opt = optax.inject_hyperparams(optax.adam)(learning_rate=config.learning_rates[0])
-    stacked = jax.tree.map(
-        lambda *x: jnp.stack(x), *[translators[m[0]].g_c_params for m in members]
-    )
-    opt_state = jax.vmap(opt.init)(stacked)
-    opt_state.hyperparams["learning_rate"] = jnp.asarray([m[1] for m in members], jnp.float32)
-    trained = stacked
-    anchor_weights = jnp.asarray([m[2] for m in members], jnp.float32)
-
-    # The trained parameters and the anchor data are arguments, not constants folded into the
-    # compiled step, so the persistent compilation cache serves every start point.
-    @jax.jit
-    def step(params, opt_state, trained, anchor_weights, s_anchor, s_batch, x_batch):
-        grad_fn = jax.value_and_grad(loss_one, has_aux=True)
-        (_, loss), grads = jax.vmap(grad_fn, in_axes=(0, 0, 0, None, None, None))(
-            params, trained, anchor_weights, s_anchor, s_batch, x_batch
-        )
-        updates, opt_state = jax.vmap(opt.update)(grads, opt_state, params)
-        return optax.apply_updates(params, updates), opt_state, loss
-
-    @jax.jit
-    def val_commands(params):
-        short = jax.vmap(lambda g: generator_commands(tr, g, s_val))(params)
-        long = jax.vmap(lambda g: generator_commands(tr, g, s_long))(params)
-        return short, long
-
-    def validate(params) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """([M] held-out score: the mean of its two parts, [M] window programs' X_err, [M] long
-        programs' X_err), in cm."""
-        short, long = (np.asarray(c, np.float64) for c in val_commands(params))
-        err_short = x_err_cm_c(arm_c, short, k, x_val)
-        err_long = x_err_cm_c(arm_c, long, k, x_long)
-        return 0.5 * (err_short + err_long), err_short, err_long
-
-    def record_validation(step_index: int, params) -> np.ndarray:
-        """Validates, adds the scores to the history and returns the [M] held-out score."""
-        score, err_short, err_long = validate(params)
-        history["val_x_err_cm"][step_index] = score.tolist()
-        history["val_window_x_err_cm"].append(err_short.tolist())
-        history["val_long_x_err_cm"].append(err_long.tolist())
-        return score
-
-    history = {
-        "members": members,
-        "val_window_x_err_cm": [],
-        "val_long_x_err_cm": [],
-        "train_loss": [],
-        "step_wall_s": [],
-        "val_x_err_cm": {},
-        "complete": False,
-    }
-    best_params = stacked
-    best_err = record_validation(0, stacked)
-    best_step = np.zeros(len(members), int)
-    log(f"validation X_err before fine-tuning (cm): {np.round(best_err, 4).tolist()}")
-
-    def best_so_far() -> list[dict]:
-        """Per seed, the best iterate of the member (learning rate, anchor weight) with the
-        lowest held-out score so far; fills the history's summary fields."""
-        pick = [
-            min(
-                (m for m, member in enumerate(members) if member[0] == s), key=lambda m: best_err[m]
-            )
-            for s in range(len(translators))
-        ]
-        history["steps_run"] = len(history["train_loss"])
-        history["best_step"] = [int(best_step[m]) for m in pick]
-        history["best_learning_rate"] = [members[m][1] for m in pick]
-        history["best_anchor_weight"] = [members[m][2] for m in pick]
-        history["val_x_err_cm_before"] = [float(history["val_x_err_cm"][0][m]) for m in pick]
-        history["best_val_x_err_cm"] = [float(best_err[m]) for m in pick]
-        history["wall_s"] = time.perf_counter() - t0
-        return [jax.tree.map(lambda x, m=m: np.asarray(x[m]), best_params) for m in pick]
-
+    data = finetune_data(config, arm_s, tr.bounds, log)
+    members = member_grid(len(translators), config)
+    opt, trained, opt_state, anchor_weights = init_members(translators, members, config)
+    step = make_finetune_step(tr, arm_c, k, config, data.window_steps, opt)
+    validate = make_validation(tr, arm_c, k, data)
+    history = _new_history(members)
+    best = BestIterates.start(trained, _record_validation(history, 0, validate(trained)))
+    log(f"validation X_err before fine-tuning (cm): {np.round(best.score, 4).tolist()}")
     rng = np.random.default_rng(config.seed)
-    params = stacked
-    bar = tqdm(range(1, config.steps + 1), disable=not progress, desc="finetune", unit="step")
-    for i in bar:
+
+    def train_once(i: int, params, opt_state):
+        """One Adam step of every member on a random batch of the training programs."""
         pick = rng.choice(config.n_train, size=config.batch_size, replace=False)
         t_step = time.perf_counter()
-        x_batch = jnp.asarray(x_train[pick], jnp.float32)
-        params, opt_state, loss = step(
-            params,
-            opt_state,
-            trained,
-            anchor_weights,
-            s_anchor,
-            jnp.asarray(s_train[pick]),
-            x_batch,
-        )
+        x_batch = jnp.asarray(data.x_train[pick], jnp.float32)
+        batch = (data.s_anchor, jnp.asarray(data.s_train[pick]), x_batch)
+        params, opt_state, loss = step(params, opt_state, trained, anchor_weights, *batch)
         loss = np.asarray(loss)
         history["step_wall_s"].append(time.perf_counter() - t_step)
         history["train_loss"].append(loss.tolist())
-        if not np.isfinite(loss).all():
-            log(f"step {i}: non-finite loss {loss}; stopping, keeping the best iterate")
-            break
-        out_of_time = config.max_wall_s > 0 and time.perf_counter() - t0 > config.max_wall_s
-        if i % config.eval_every == 0 or i == config.steps or out_of_time:
-            err = record_validation(i, params)
-            better = err < best_err
-            best_params = keep_better(best_params, params, better)
-            best_err = np.where(better, err, best_err)
-            best_step = np.where(better, i, best_step)
-            bar.set_postfix(loss=float(loss.mean()), val_cm=float(err.mean()))
-            if on_validation is not None:
-                on_validation(best_so_far(), history)
-        if out_of_time:
-            log(f"stopping after step {i}: max_wall_s = {config.max_wall_s} s reached")
-            break
-    bar.close()
+        return params, opt_state, loss
+
+    def report(best: BestIterates) -> None:
+        on_validation(_best_per_seed(best, members, len(translators), history, t0), history)
+
+    best = validated_loop(
+        config.steps,
+        trained,
+        opt_state,
+        best,
+        train_once,
+        lambda i, params: _record_validation(history, i, validate(params)),
+        None if on_validation is None else report,
+        config=config,
+        t0=t0,
+        desc="finetune",
+        unit="step",
+        progress=progress,
+        log=log,
+    )
     history["complete"] = True
-    return best_so_far(), history
-
-
-def finetuned_checkpoint(source: tuple[dict, dict], g_c_params, finetune_meta: dict):
-    """(tree, meta) of a source translator checkpoint (`checkpoint.load`'s pair) with G_c
-    replaced and `finetune_meta` added to its metadata.
-
-    A source that was itself fine-tuned keeps its record: the metadata's "finetune" is this
-    stage, "finetune_earlier" lists the earlier stages, oldest first.
-    """
-    tree, meta = source
-    earlier = list(meta.get("finetune_earlier", [])) + (
-        [meta["finetune"]] if "finetune" in meta else []
-    )
-    stages = {"finetune": finetune_meta} | ({"finetune_earlier": earlier} if earlier else {})
-    return dict(tree) | {"g_c": g_c_params}, meta | stages
-
-
-def save_finetuned(path, source_path, g_c_params, finetune_meta: dict) -> Path:
-    """Writes `finetuned_checkpoint` of the translator file at `source_path` to `path`."""
-    tree, meta = finetuned_checkpoint(checkpoint.load(source_path), g_c_params, finetune_meta)
-    return checkpoint.save(path, tree, meta)
-
-
-def stage_parser(module: str, doc: str) -> argparse.ArgumentParser:
-    """A parser with the flags of every fine-tune stage's CLI (this module's and `ccgan.distill`'s):
-    --translators, --seeds, --out, --model, --domain; `start_stage` checks and loads them."""
-    p = cli_parser(module, doc)
-    p.add_argument("--translators", nargs="+", required=True, help="translator checkpoints")
-    p.add_argument("--seeds", type=int, nargs="+", help="seed of each file (default 0, 1, ...)")
-    p.add_argument("--out", required=True, help="output folder")
-    p.add_argument(
-        "--model",
-        default=str(constants.SOLID_MODEL_PATH),
-        help="MJCF of the arm to simulate: the one the translators were trained on (the"
-        " committed translators: the solid-disc arm)",
-    )
-    p.add_argument(
-        "--domain",
-        default="constrained",
-        choices=sorted(d for d in mjx_arm.DOMAINS if d != "source"),
-        help="D_c domain (mjx_arm.DOMAINS)",
-    )
-    return p
-
-
-@dataclasses.dataclass
-class Stage:
-    """What a fine-tune stage's CLI loaded: its translators (each file read once), the arms, the
-    output folder and the run record every written file carries."""
-
-    seeds: list[int]
-    sources: list[tuple[dict, dict]]
-    translators: list[Translator]
-    arm_s: object
-    arm_c: object
-    out: Path
-    run: dict
-
-    def write(self, params, per_seed_meta: list[dict], history: dict, json_name: str) -> None:
-        """Writes each seed's translator file (G_c replaced, the stage's record added to its
-        metadata) and the history, atomically."""
-        for s_i, (seed, source) in enumerate(zip(self.seeds, self.sources, strict=True)):
-            meta = self.run | {"seed": seed} | per_seed_meta[s_i]
-            tree, file_meta = finetuned_checkpoint(source, params[s_i], meta)
-            names = [f"translator_seed{seed}.ckpt"] + (["translator.ckpt"] if s_i == 0 else [])
-            for name in names:
-                checkpoint.save(self.out / name, tree, file_meta)
-        tmp = self.out / f"{json_name}.tmp"
-        tmp.write_text(json.dumps(self.run | {"history": history}, indent=2))
-        tmp.replace(self.out / json_name)
-
-
-def trained_model_hash(meta: dict) -> str | None:
-    """The `Arm.model_hash` a translator file says it was trained or last refined on, or None
-    (files written before the hash was recorded)."""
-    return meta.get("finetune", {}).get("model_hash") or meta.get("model_hash")
-
-
-def start_stage(p: argparse.ArgumentParser, a, module: str, config: dict, argv) -> Stage:
-    """Checks and loads what `stage_parser`'s flags name; `module` and `config` go into the run
-    record. Every problem (seeds, output folder, an unreadable translator or MJCF, translators
-    recorded on another arm) is a usage error (status 2) before any simulation starts."""
-    import jax
-
-    from mjx_arm.machine import cpu_model, enable_compilation_cache
-
-    seeds = a.seeds if a.seeds is not None else list(range(len(a.translators)))
-    if len(seeds) != len(a.translators):
-        p.error("give one seed per translator file")
-    if len(set(seeds)) != len(seeds):
-        p.error(f"--seeds must be distinct, got {seeds}")
-    check_output_dir(p, "--out", a.out)
-    try:
-        sources = [checkpoint.load(path) for path in a.translators]  # read once, rewritten often
-        translators = [
-            translator_from_checkpoint(src, path)
-            for src, path in zip(sources, a.translators, strict=True)
-        ]
-    except checkpoint.CheckpointError as err:
-        p.error(f"--translators: {err}")
-    try:
-        arm_s, arm_c = (mjx_arm.load(a.model, domain=d) for d in ("source", a.domain))
-    except (FileNotFoundError, ValueError) as err:  # ModelValidationError is a ValueError
-        p.error(f"--model {a.model}: {err}")
-    for path, (_, meta) in zip(a.translators, sources, strict=True):
-        trained = trained_model_hash(meta)
-        if trained is not None and trained != arm_c.model_hash:
-            p.error(
-                f"{path} was trained on the arm with model hash {trained}, but --model"
-                f" {a.model} has {arm_c.model_hash}"
-            )
-    enable_compilation_cache()
-    out = Path(a.out)
-    out.mkdir(parents=True, exist_ok=True)
-    dev = jax.devices()[0]
-    run = {
-        "command": f"python -m {module} " + " ".join(argv if argv is not None else sys.argv[1:]),
-        "machine": f"{cpu_model()}; JAX device: {dev.platform} ({dev.device_kind})",
-        "config": config,
-        "model": str(a.model),
-        "model_hash": arm_c.model_hash,
-        "domain": a.domain,
-        "sources": [str(x) for x in a.translators],
-        "seeds": seeds,
-    }
-    return Stage(seeds, sources, translators, arm_s, arm_c, out, run)
+    return _best_per_seed(best, members, len(translators), history, t0), history
 
 
 def build_parser() -> argparse.ArgumentParser:

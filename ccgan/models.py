@@ -7,6 +7,7 @@ in [0, 1]. Sequences are batch-major, `[B, T, features]`.
 from __future__ import annotations
 
 import functools
+from collections.abc import Callable
 from typing import NamedTuple
 
 import flax.linen as nn
@@ -150,7 +151,7 @@ def forward_stretched(
       unroll: periods per loop iteration (fewer, longer iterations; numerics unchanged).
       impl: "lean" (matrix products) or "lean_reduce" (each small matrix product written as a
         broadcast multiply and a sum, which XLA can fuse with the elementwise work around it:
-        the faster on a GPU, the slower on a CPU; `ccgan.train.resolved_feedback_impl` picks).
+        the faster on a GPU, the slower on a CPU; `ccgan.trainer.resolved_feedback_impl` picks).
 
     Returns:
       [B, T, 6] normalised poses after each command's k-th period.
@@ -211,6 +212,145 @@ def _multiply_sum(x, w):
     return jnp.sum(x[..., :, None] * w, axis=-2)
 
 
+class _LeanLoop(NamedTuple):
+    """Static settings of the lean rollout: LSTM width H, the bound k_max on k, periods per loop
+    iteration and `matmul(x, w)`, the product every per-period matrix product uses."""
+
+    hidden: int
+    k_max: int
+    unroll: int
+    matmul: Callable
+
+
+def _lean_cell(loop: _LeanLoop, w: LstmWeights, c, h, pose, gate_p):
+    """One period forward: carry (c [B, H], h [B, H], pose [B, 6]) and the command's gate input
+    gate_p [B, 4H] -> (new carry, saved [B, 6H + F]: the input cell state and every activation,
+    all the backward needs)."""
+    hidden, matmul = loop.hidden, loop.matmul
+    z = matmul(jnp.concatenate([pose, h], -1), w.w_in) + gate_p
+    s_i, s_f, s_o = (jax.nn.sigmoid(z[:, j * hidden : (j + 1) * hidden]) for j in (0, 1, 3))
+    t_g = jnp.tanh(z[:, 2 * hidden : 3 * hidden])
+    c_new = s_f * c + s_i * t_g
+    tanh_c = jnp.tanh(c_new)
+    h_new = s_o * tanh_c
+    act = jnp.tanh(matmul(h_new, w.w_fc) + w.b_fc)
+    pose_new = matmul(act, w.w_out) + w.b_out
+    saved = jnp.concatenate([c, s_i, s_f, t_g, s_o, tanh_c, act], -1)
+    return (c_new, h_new, pose_new), saved
+
+
+def _lean_forward(loop: _LeanLoop, w: LstmWeights, pressure, pose0, k):
+    """The live periods forward: (poses [B, T, 6] after each command's k-th period, saved
+    activations [padded, B, 6H + F] of every period, those past T k unused)."""
+    hidden, unroll = loop.hidden, loop.unroll
+    t, n, n_iter, padded = _loop_sizes(pressure, k, loop.k_max, unroll)
+    b = pressure.shape[0]
+    gate_p = jnp.einsum("btp,pg->tbg", pressure, w.w_pressure) + w.b_gate  # [T, B, 4H]
+    zeros = jnp.zeros((b, hidden), pressure.dtype)
+    carry0 = (zeros, zeros, pose0)
+    width = 6 * hidden + w.w_fc.shape[1]
+    saved_buf = jnp.zeros((padded, b, width), pressure.dtype)
+    pose_buf = jnp.zeros((padded, b, POSE_DIM), pressure.dtype)
+
+    def body(state):
+        j, carry, saved_buf, pose_buf = state
+        saved_block, pose_block = [], []
+        for u in range(unroll):
+            i = j * unroll + u
+            new, saved = _lean_cell(loop, w, *carry, gate_p[jnp.clip(i // k, 0, t - 1)])
+            carry = jax.tree.map(lambda a, b, i=i: jnp.where(i < n, a, b), new, carry)
+            saved_block.append(saved)
+            pose_block.append(carry[2])
+        saved_buf = jax.lax.dynamic_update_slice_in_dim(
+            saved_buf, jnp.stack(saved_block), j * unroll, 0
+        )
+        pose_buf = jax.lax.dynamic_update_slice_in_dim(
+            pose_buf, jnp.stack(pose_block), j * unroll, 0
+        )
+        return j + 1, carry, saved_buf, pose_buf
+
+    state = (0, carry0, saved_buf, pose_buf)
+    _, _, saved_buf, pose_buf = jax.lax.while_loop(lambda s: s[0] < n_iter, body, state)
+    poses = pose_buf[(jnp.arange(t) + 1) * k - 1]  # after period (t + 1) k - 1
+    return jnp.swapaxes(poses, 0, 1), saved_buf
+
+
+def _lean_cell_backward(loop: _LeanLoop, w_t, saved, ct_pose, d_carry):
+    """One period backward, from its saved activations [B, 6H + F].
+
+    Args:
+      w_t: (w_in^T, w_fc^T, w_out^T), transposed once outside the loop.
+      ct_pose: cotangent [B, 6] of the period's output pose from the loss (non-zero where a
+        command closes).
+      d_carry: cotangents (d_c [B, H], d_h [B, H], d_pose [B, 6]) of the period's output carry,
+        from the later periods.
+
+    Returns:
+      (cotangents (d_c, d_h, d_pose) of the period's input carry, d_z [B, 4H]: the cotangent of
+      its gate pre-activations).
+    """
+    hidden, matmul = loop.hidden, loop.matmul
+    w_in_t, w_fc_t, w_out_t = w_t
+    c, s_i, s_f, t_g, s_o, tanh_c = (saved[:, m * hidden : (m + 1) * hidden] for m in range(6))
+    act = saved[:, 6 * hidden :]
+    d_c, d_h, d_pose = d_carry
+    d_pose_new = d_pose + ct_pose
+    d_fc = matmul(d_pose_new, w_out_t) * (1.0 - act * act)
+    d_h_new = d_h + matmul(d_fc, w_fc_t)
+    d_c_new = d_c + d_h_new * s_o * (1.0 - tanh_c * tanh_c)
+    d_z = jnp.concatenate(
+        [
+            d_c_new * t_g * s_i * (1.0 - s_i),
+            d_c_new * c * s_f * (1.0 - s_f),
+            d_c_new * s_i * (1.0 - t_g * t_g),
+            d_h_new * tanh_c * s_o * (1.0 - s_o),
+        ],
+        -1,
+    )
+    d_in = matmul(d_z, w_in_t)
+    return (d_c_new * s_f, d_in[:, POSE_DIM:], d_in[:, :POSE_DIM]), d_z
+
+
+def _lean_backward(loop: _LeanLoop, w: LstmWeights, pressure, k, saved_buf, ct):
+    """The live periods backward, last first: cotangent ct [B, T, 6] of the poses ->
+    (d_pressure [B, T, 3], d_pose0 [B, 6])."""
+    hidden, unroll = loop.hidden, loop.unroll
+    t, n, n_iter, padded = _loop_sizes(pressure, k, loop.k_max, unroll)
+    b = pressure.shape[0]
+    # Cotangent of the pose after each period (non-zero where a command closes).
+    ct_buf = jnp.zeros((padded, b, POSE_DIM), ct.dtype)
+    ct_buf = ct_buf.at[(jnp.arange(t) + 1) * k - 1].set(jnp.swapaxes(ct, 0, 1))
+    w_t = (w.w_in.T, w.w_fc.T, w.w_out.T)
+    zeros = jnp.zeros((b, hidden), ct.dtype)
+    d_gate_buf = jnp.zeros((padded, b, 4 * hidden), ct.dtype)
+
+    def body(state):
+        j, (d_c, d_h, d_pose), d_gate_buf = state
+        block = jax.lax.dynamic_slice_in_dim(saved_buf, j * unroll, unroll, 0)
+        cts = jax.lax.dynamic_slice_in_dim(ct_buf, j * unroll, unroll, 0)
+        d_gates = [None] * unroll
+        for u in reversed(range(unroll)):
+            live = j * unroll + u < n
+            new, d_z = _lean_cell_backward(loop, w_t, block[u], cts[u], (d_c, d_h, d_pose))
+            d_c, d_h, d_pose = (
+                jnp.where(live, a, old) for a, old in zip(new, (d_c, d_h, d_pose), strict=True)
+            )
+            d_gates[u] = jnp.where(live, d_z, 0.0)
+        d_gate_buf = jax.lax.dynamic_update_slice_in_dim(
+            d_gate_buf, jnp.stack(d_gates), j * unroll, 0
+        )
+        return j - 1, (d_c, d_h, d_pose), d_gate_buf
+
+    state = (n_iter - 1, (zeros, zeros, jnp.zeros_like(ct[:, 0])), d_gate_buf)
+    _, (_, _, d_pose0), d_gate_buf = jax.lax.while_loop(lambda s: s[0] >= 0, body, state)
+    # Sum each command's k periods: differences of a cumulative sum at the block ends.
+    csum = jnp.cumsum(d_gate_buf, 0)
+    ends = csum[(jnp.arange(t) + 1) * k - 1]
+    d_cmd = ends - jnp.concatenate([jnp.zeros_like(ends[:1]), ends[:-1]], 0)  # [T, B, 4H]
+    d_pressure = jnp.einsum("tbg,pg->btp", d_cmd, w.w_pressure)
+    return d_pressure, d_pose0
+
+
 def _make_stretched_lean(model: ForwardModel, k_max: int, unroll: int, matmul=jnp.matmul):
     """The custom-VJP function (params, pressure [B, T, 3], pose0 [B, 6], k) -> poses [B, T, 6].
 
@@ -218,122 +358,24 @@ def _make_stretched_lean(model: ForwardModel, k_max: int, unroll: int, matmul=jn
     periods past T k masked. Per period the forward runs one gate product
     [B, 6 + H] x [6 + H, 4H] (the pressure part, constant over a command's k periods, is
     computed once per command), one fused gate update and the two output layers, and stores the
-    activations; the backward runs three products and two fused updates per period, no
-    recomputation. The per-command pressure gradients are block sums of the per-period gate
-    gradients (a cumulative sum, no scatter). `matmul(x, w)` computes the six per-period
-    products.
+    activations (`_lean_forward`); the backward runs three products and two fused updates per
+    period, no recomputation (`_lean_backward`). The per-command pressure gradients are block
+    sums of the per-period gate gradients (a cumulative sum, no scatter). `matmul(x, w)`
+    computes the six per-period products.
     """
-    hidden = model.hidden
-
-    sizes = functools.partial(_loop_sizes, k_max=k_max, unroll=unroll)
-
-    def cell(w: LstmWeights, c, h, pose, gate_p):
-        z = matmul(jnp.concatenate([pose, h], -1), w.w_in) + gate_p
-        s_i, s_f, s_o = (jax.nn.sigmoid(z[:, j * hidden : (j + 1) * hidden]) for j in (0, 1, 3))
-        t_g = jnp.tanh(z[:, 2 * hidden : 3 * hidden])
-        c_new = s_f * c + s_i * t_g
-        tanh_c = jnp.tanh(c_new)
-        h_new = s_o * tanh_c
-        act = jnp.tanh(matmul(h_new, w.w_fc) + w.b_fc)
-        pose_new = matmul(act, w.w_out) + w.b_out
-        # What the backward needs: the input cell state and every activation.
-        saved = jnp.concatenate([c, s_i, s_f, t_g, s_o, tanh_c, act], -1)
-        return (c_new, h_new, pose_new), saved
-
-    def run(w: LstmWeights, pressure, pose0, k):
-        t, n, n_iter, padded = sizes(pressure, k)
-        b = pressure.shape[0]
-        gate_p = jnp.einsum("btp,pg->tbg", pressure, w.w_pressure) + w.b_gate  # [T, B, 4H]
-        zeros = jnp.zeros((b, hidden), pressure.dtype)
-        carry0 = (zeros, zeros, pose0)
-        width = 6 * hidden + w.w_fc.shape[1]
-        saved_buf = jnp.zeros((padded, b, width), pressure.dtype)
-        pose_buf = jnp.zeros((padded, b, POSE_DIM), pressure.dtype)
-
-        def body(state):
-            j, carry, saved_buf, pose_buf = state
-            saved_block, pose_block = [], []
-            for u in range(unroll):
-                i = j * unroll + u
-                new, saved = cell(w, *carry, gate_p[jnp.clip(i // k, 0, t - 1)])
-                carry = jax.tree.map(lambda a, b, i=i: jnp.where(i < n, a, b), new, carry)
-                saved_block.append(saved)
-                pose_block.append(carry[2])
-            saved_buf = jax.lax.dynamic_update_slice_in_dim(
-                saved_buf, jnp.stack(saved_block), j * unroll, 0
-            )
-            pose_buf = jax.lax.dynamic_update_slice_in_dim(
-                pose_buf, jnp.stack(pose_block), j * unroll, 0
-            )
-            return j + 1, carry, saved_buf, pose_buf
-
-        state = (0, carry0, saved_buf, pose_buf)
-        _, _, saved_buf, pose_buf = jax.lax.while_loop(lambda s: s[0] < n_iter, body, state)
-        poses = pose_buf[(jnp.arange(t) + 1) * k - 1]  # after period (t + 1) k - 1
-        return jnp.swapaxes(poses, 0, 1), saved_buf
+    loop = _LeanLoop(model.hidden, k_max, unroll, matmul)
 
     @jax.custom_vjp
     def stretched(w, pressure, pose0, k):
-        return run(w, pressure, pose0, k)[0]
+        return _lean_forward(loop, w, pressure, pose0, k)[0]
 
     def fwd(w, pressure, pose0, k):
-        poses, saved_buf = run(w, pressure, pose0, k)
+        poses, saved_buf = _lean_forward(loop, w, pressure, pose0, k)
         return poses, (w, pressure, k, saved_buf)
 
     def bwd(res, ct):
         w, pressure, k, saved_buf = res
-        t, n, n_iter, padded = sizes(pressure, k)
-        b = pressure.shape[0]
-        # Cotangent of the pose after each period (non-zero where a command closes).
-        ct_buf = jnp.zeros((padded, b, POSE_DIM), ct.dtype)
-        ct_buf = ct_buf.at[(jnp.arange(t) + 1) * k - 1].set(jnp.swapaxes(ct, 0, 1))
-        w_in_t, w_fc_t, w_out_t = w.w_in.T, w.w_fc.T, w.w_out.T
-        h4 = 4 * hidden
-        zeros = jnp.zeros((b, hidden), ct.dtype)
-        d_gate_buf = jnp.zeros((padded, b, h4), ct.dtype)
-
-        def body(state):
-            j, (d_c, d_h, d_pose), d_gate_buf = state
-            block = jax.lax.dynamic_slice_in_dim(saved_buf, j * unroll, unroll, 0)
-            cts = jax.lax.dynamic_slice_in_dim(ct_buf, j * unroll, unroll, 0)
-            d_gates = [None] * unroll
-            for u in reversed(range(unroll)):
-                live = j * unroll + u < n
-                c, s_i, s_f, t_g, s_o, tanh_c = (
-                    block[u][:, m * hidden : (m + 1) * hidden] for m in range(6)
-                )
-                act = block[u][:, 6 * hidden :]
-                d_pose_new = d_pose + cts[u]
-                d_fc = matmul(d_pose_new, w_out_t) * (1.0 - act * act)
-                d_h_new = d_h + matmul(d_fc, w_fc_t)
-                d_c_new = d_c + d_h_new * s_o * (1.0 - tanh_c * tanh_c)
-                d_z = jnp.concatenate(
-                    [
-                        d_c_new * t_g * s_i * (1.0 - s_i),
-                        d_c_new * c * s_f * (1.0 - s_f),
-                        d_c_new * s_i * (1.0 - t_g * t_g),
-                        d_h_new * tanh_c * s_o * (1.0 - s_o),
-                    ],
-                    -1,
-                )
-                d_in = matmul(d_z, w_in_t)
-                new = (d_c_new * s_f, d_in[:, POSE_DIM:], d_in[:, :POSE_DIM])
-                d_c, d_h, d_pose = (
-                    jnp.where(live, a, old) for a, old in zip(new, (d_c, d_h, d_pose), strict=True)
-                )
-                d_gates[u] = jnp.where(live, d_z, 0.0)
-            d_gate_buf = jax.lax.dynamic_update_slice_in_dim(
-                d_gate_buf, jnp.stack(d_gates), j * unroll, 0
-            )
-            return j - 1, (d_c, d_h, d_pose), d_gate_buf
-
-        state = (n_iter - 1, (zeros, zeros, jnp.zeros_like(ct[:, 0])), d_gate_buf)
-        _, (_, _, d_pose0), d_gate_buf = jax.lax.while_loop(lambda s: s[0] >= 0, body, state)
-        # Sum each command's k periods: differences of a cumulative sum at the block ends.
-        csum = jnp.cumsum(d_gate_buf, 0)
-        ends = csum[(jnp.arange(t) + 1) * k - 1]
-        d_cmd = ends - jnp.concatenate([jnp.zeros_like(ends[:1]), ends[:-1]], 0)  # [T, B, 4H]
-        d_pressure = jnp.einsum("tbg,pg->btp", d_cmd, w.w_pressure)
+        d_pressure, d_pose0 = _lean_backward(loop, w, pressure, k, saved_buf, ct)
         return jax.tree.map(jnp.zeros_like, w), d_pressure, d_pose0, None
 
     stretched.defvjp(fwd, bwd)

@@ -44,7 +44,8 @@ from ccgan.cli import (
     data_from_args,
 )
 from ccgan.config import TrainConfig, check_forward_config
-from ccgan.train import data_fingerprint, make_trainer
+from ccgan.train import data_fingerprint
+from ccgan.trainer import make_trainer
 from mjx_arm.machine import cpu_model
 from tracking.config import ConfigError, check_fields
 

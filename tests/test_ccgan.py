@@ -20,6 +20,7 @@ from ccgan import config as config_lib
 from ccgan import data as data_lib
 from ccgan import forward as forward_lib
 from ccgan import train as train_lib
+from mjx_arm.programs import random_held_programs
 from tracking import metrics
 
 # ----------------------------------------------------------------------------- data
@@ -286,7 +287,7 @@ def tiny_setup(compile_cache):
     arrays = []
     for domain, n in (("source", 5), ("constrained", 4)):  # unpaired: different counts
         arm = mjx_arm.load(xml=xml, domain=domain)
-        p = data_lib.random_held_programs(rng, n, 30)
+        p = random_held_programs(rng, n, 30)
         arrays += [p, data_lib.simulate(arm, p)]
     data = data_lib.prepare(*arrays, window_length=TINY.window_length, n_val=TINY.n_val)
     fconf = forward_lib.ForwardConfig(epochs=15, batch_size=6, hidden=16, fc=16)

@@ -24,6 +24,7 @@ from ccgan.models import Generator
 from ccgan.translator import Translator, translator_path
 from mjx_arm import constants
 from mjx_arm.dataset import Dataset, DatasetError, ModelHashMismatchError, save_dataset
+from mjx_arm.programs import random_held_programs
 from tracking.config import ConfigError
 
 # ----------------------------------------------------------------------------- fixtures
@@ -40,7 +41,7 @@ def small_arm(small_xml, tmp_path_factory):
 def write_dataset(path, domain, model_hash, n=4, steps=20, seed=0):
     """A synthetic babbling file: held random pressures, poses a smooth random walk."""
     rng = np.random.default_rng(seed)
-    pressures = data_lib.random_held_programs(rng, n, steps).astype(np.float32)
+    pressures = random_held_programs(rng, n, steps).astype(np.float32)
     poses = np.cumsum(rng.normal(scale=0.01, size=(n, steps, 6)), axis=1).astype(np.float32)
     low, high = poses.reshape(-1, 6).min(0), poses.reshape(-1, 6).max(0)
     save_dataset(
@@ -191,7 +192,7 @@ def test_run_stored_with_stretch_choices_resumes_under_hold_factors(tmp_path):
 
 
 def test_committed_translator_config_reads_with_the_renamed_field():
-    path = constants.ROOT / "results" / "ccgan" / "translator_seed0.ckpt"
+    path = constants.ROOT / "results" / "translators" / "ccgan" / "translator_seed0.ckpt"
     stored = checkpoint.read(path)[0]["config"]
     assert "stretch_choices" in stored
     config = config_lib.TrainConfig.from_dict(stored)
@@ -337,7 +338,7 @@ def test_forward_training_shows_progress(tmp_path, capsys):
     rng = np.random.default_rng(0)
     arrays = []
     for _ in range(2):
-        p = data_lib.random_held_programs(rng, 3, 10)
+        p = random_held_programs(rng, 3, 10)
         arrays += [p, np.cumsum(rng.normal(scale=0.01, size=(3, 10, 6)), axis=1)]
     data = data_lib.prepare(*arrays, window_length=5, n_val=1)
     fconf = forward_lib.ForwardConfig(epochs=2, batch_size=2, hidden=4, fc=4)

@@ -51,7 +51,13 @@ def test_tiny_end_to_end(small_xml, tmp_path, capsys):
 
     # A WCGAN-GP stand-in with one model per training seed (copies of the shipped translator),
     # so the per-seed path runs through the table, the noise and the periodicity tests.
-    shipped = Path(__file__).resolve().parent.parent / "results" / "translators" / "ccgan" / "translator.ckpt"
+    shipped = (
+        Path(__file__).resolve().parent.parent
+        / "results"
+        / "translators"
+        / "ccgan"
+        / "translator.ckpt"
+    )
     (tmp_path / "wcgan").mkdir()
     for name in ("translator.ckpt", "translator_seed0.ckpt", "translator_seed1.ckpt"):
         shutil.copy(shipped, tmp_path / "wcgan" / name)
@@ -118,7 +124,13 @@ def test_translator_per_trained_seed(tmp_path):
     """translator_seed{s}.ckpt beside the checkpoint: one trained model per evaluation seed."""
     import shutil
 
-    shipped = Path(__file__).resolve().parent.parent / "results" / "translators" / "ccgan" / "translator.ckpt"
+    shipped = (
+        Path(__file__).resolve().parent.parent
+        / "results"
+        / "translators"
+        / "ccgan"
+        / "translator.ckpt"
+    )
     for name in ("translator.ckpt", "translator_seed0.ckpt", "translator_seed1.ckpt"):
         shutil.copy(shipped, tmp_path / name)
     path = str(tmp_path / "translator.ckpt")
@@ -137,7 +149,13 @@ def test_default_translator_finds_its_trained_seeds(tmp_path, monkeypatch):
     """Without --ccgan-path the loader's default checkpoint is used, with its per-seed files."""
     import shutil
 
-    shipped = Path(__file__).resolve().parent.parent / "results" / "translators" / "ccgan" / "translator.ckpt"
+    shipped = (
+        Path(__file__).resolve().parent.parent
+        / "results"
+        / "translators"
+        / "ccgan"
+        / "translator.ckpt"
+    )
     for name in ("translator.ckpt", "translator_seed0.ckpt", "translator_seed1.ckpt"):
         shutil.copy(shipped, tmp_path / name)
     monkeypatch.setenv("CCGAN_TRANSLATOR", str(tmp_path / "translator.ckpt"))

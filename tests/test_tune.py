@@ -8,9 +8,9 @@ import optuna
 import pytest
 
 import mjx_arm  # noqa: F401  (sets the XLA CPU flag before JAX creates its backend)
-from ccgan import data as data_lib
 from ccgan import tune
 from mjx_arm.dataset import Dataset, save_dataset
+from mjx_arm.programs import random_held_programs
 
 TINY_FLAGS = [
     "--epochs", "2", "--batch-size", "4", "--n-val", "1", "--hold-factors", "1", "2",
@@ -24,7 +24,7 @@ TINY_FLAGS = [
 def _write_domain(path, rng, n, gain, domain):
     """Synthetic babbling: held random pressures, poses a first-order lag of them (6 dims),
     written as an `mjx_arm.dataset` file of `domain` (both domains: one made-up arm)."""
-    pressures = data_lib.random_held_programs(rng, n, 20)
+    pressures = random_held_programs(rng, n, 20)
     poses = np.zeros((n, 20, 6))
     pose = np.zeros((n, 6))
     for t in range(20):

@@ -1,0 +1,281 @@
+"""What the fine-tune stages of G_c (`ccgan.finetune`, `ccgan.distill`) share.
+
+Both stages start from trained translators (one per seed), train every seed's G_c side by side
+(their parameters stacked on a leading axis and vmapped), score them on held-out programs in the
+MuJoCo C simulator and keep each one's best iterate (`BestIterates`), so a stage that makes
+things worse writes the original. `validated_loop` is that loop, with its stopping rules (a
+non-finite loss, a wall-clock budget). `stage_parser` and `start_stage` are their common command
+line (--translators, --seeds, --out, --model, --domain), checked before any simulation, and
+`Stage.write` their output: translator checkpoints with G_c replaced and the stage recorded in
+their metadata (`finetuned_checkpoint`), and the history as JSON.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import json
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+import mjx_arm  # noqa: F401  (before jax: sets the XLA CPU flag)
+from ccgan import checkpoint
+from ccgan.cli import check_output_dir, cli_parser
+from ccgan.data import PRESSURE_DIM, denormalise_pressure
+from ccgan.translator import Translator, translator_from_checkpoint
+from mjx_arm import constants
+
+
+def generator_commands(translator: Translator, g_params, samples_s):
+    """G_c's D_c commands [B, T, 3] (bar, one per source step) for normalised D_s samples
+    [B, T, 9] (`ccgan.data.samples`); differentiable in g_params."""
+    out = translator.generator.apply(g_params, samples_s)
+    return denormalise_pressure(out[..., :PRESSURE_DIM])
+
+
+def common_k(translators: list[Translator]) -> int:
+    """The hold factor k every translator shares.
+
+    Raises:
+      ValueError: no translators, or they disagree on k.
+    """
+    if not translators:
+        raise ValueError("need at least one translator")
+    k = translators[0].k
+    if any(t.k != k for t in translators):
+        raise ValueError(f"translators disagree on k: {[t.k for t in translators]}")
+    return k
+
+
+def keep_better(best_params, params, better: np.ndarray):
+    """Stacked parameters [M, ...]: params where better [M] is True, else best_params."""
+    import jax
+    import jax.numpy as jnp
+
+    return jax.tree.map(
+        lambda b, p: jnp.where(better.reshape((-1,) + (1,) * (p.ndim - 1)), p, b),
+        best_params,
+        params,
+    )
+
+
+@dataclasses.dataclass(frozen=True)
+class BestIterates:
+    """The best iterate so far of each of M members trained side by side, by a held-out score.
+
+    Attributes:
+      params: the members' parameters, stacked on a leading axis [M, ...].
+      score: [M] held-out score (cm; lower is better).
+      step: [M] the step (or epoch) each iterate comes from; 0: the starting parameters.
+    """
+
+    params: Any
+    score: np.ndarray
+    step: np.ndarray
+
+    @classmethod
+    def start(cls, params, score: np.ndarray) -> BestIterates:
+        """The starting parameters [M, ...], scored [M], as the best so far (step 0)."""
+        return cls(params, score, np.zeros(len(score), int))
+
+    def update(self, step: int, params, score: np.ndarray) -> BestIterates:
+        """Takes each member's new iterate (params [M, ...], score [M]) where it scores lower."""
+        better = score < self.score
+        return BestIterates(
+            params=keep_better(self.params, params, better),
+            score=np.where(better, score, self.score),
+            step=np.where(better, step, self.step),
+        )
+
+    def take(self, members) -> list[dict]:
+        """The best parameters of the given member indices, each as a tree of NumPy arrays."""
+        import jax
+
+        return [jax.tree.map(lambda x, m=m: np.asarray(x[m]), self.params) for m in members]
+
+
+def validated_loop(
+    n: int,
+    params,
+    opt_state,
+    best: BestIterates,
+    train_once,
+    validate,
+    report,
+    *,
+    config,
+    t0: float,
+    desc: str,
+    unit: str,
+    progress: bool = True,
+    log=print,
+) -> BestIterates:
+    """The loop of a fine-tune stage: n steps (or epochs) of training, validated now and then.
+
+    Iteration i = 1..n runs `train_once(i, params, opt_state) -> (params, opt_state, loss [M])`.
+    After every `config.eval_every`-th iteration, the last, and one that ran out of time, it
+    scores the parameters with `validate(i, params) -> score [M]` (cm), keeps each member's best
+    iterate and calls `report(best)` (unless None; e.g. to write the best iterates, so that a
+    killed run keeps its progress). It stops early, keeping the best iterates so far, at a
+    non-finite loss or once `config.max_wall_s` seconds (0: no limit) have passed since `t0`
+    (`time.perf_counter()`).
+
+    Args:
+      params, opt_state: the members' parameters [M, ...] and optimiser state to start from.
+      best: the best iterates before training (`BestIterates.start`).
+      config: the stage's settings (their `eval_every` and `max_wall_s`).
+      desc, unit: the progress bar's label and unit ("step" or "epoch", also in the log).
+
+    Returns:
+      the best iterates.
+    """
+    from tqdm.auto import tqdm
+
+    bar = tqdm(range(1, n + 1), disable=not progress, desc=desc, unit=unit)
+    for i in bar:
+        params, opt_state, loss = train_once(i, params, opt_state)
+        if not np.isfinite(loss).all():
+            log(f"{unit} {i}: non-finite loss {loss}; stopping, keeping the best iterate")
+            break
+        out_of_time = config.max_wall_s > 0 and time.perf_counter() - t0 > config.max_wall_s
+        if i % config.eval_every == 0 or i == n or out_of_time:
+            score = validate(i, params)
+            best = best.update(i, params, score)
+            bar.set_postfix(loss=float(loss.mean()), val_cm=float(score.mean()))
+            if report is not None:
+                report(best)
+        if out_of_time:
+            log(f"stopping after {unit} {i}: max_wall_s = {config.max_wall_s} s reached")
+            break
+    bar.close()
+    return best
+
+
+def finetuned_checkpoint(source: tuple[dict, dict], g_c_params, finetune_meta: dict):
+    """(tree, meta) of a source translator checkpoint (`checkpoint.load`'s pair) with G_c
+    replaced and `finetune_meta` added to its metadata.
+
+    A source that was itself fine-tuned keeps its record: the metadata's "finetune" is this
+    stage, "finetune_earlier" lists the earlier stages, oldest first.
+    """
+    tree, meta = source
+    earlier = list(meta.get("finetune_earlier", [])) + (
+        [meta["finetune"]] if "finetune" in meta else []
+    )
+    stages = {"finetune": finetune_meta} | ({"finetune_earlier": earlier} if earlier else {})
+    return dict(tree) | {"g_c": g_c_params}, meta | stages
+
+
+def save_finetuned(path, source_path, g_c_params, finetune_meta: dict) -> Path:
+    """Writes `finetuned_checkpoint` of the translator file at `source_path` to `path`."""
+    tree, meta = finetuned_checkpoint(checkpoint.load(source_path), g_c_params, finetune_meta)
+    return checkpoint.save(path, tree, meta)
+
+
+def stage_parser(module: str, doc: str) -> argparse.ArgumentParser:
+    """A parser with the flags every fine-tune stage's CLI (`ccgan.finetune`, `ccgan.distill`)
+    has: --translators, --seeds, --out, --model, --domain; `start_stage` checks and loads them."""
+    p = cli_parser(module, doc)
+    p.add_argument("--translators", nargs="+", required=True, help="translator checkpoints")
+    p.add_argument("--seeds", type=int, nargs="+", help="seed of each file (default 0, 1, ...)")
+    p.add_argument("--out", required=True, help="output folder")
+    p.add_argument(
+        "--model",
+        default=str(constants.SOLID_MODEL_PATH),
+        help="MJCF of the arm to simulate: the one the translators were trained on (the"
+        " committed translators: the solid-disc arm)",
+    )
+    p.add_argument(
+        "--domain",
+        default="constrained",
+        choices=sorted(d for d in mjx_arm.DOMAINS if d != "source"),
+        help="D_c domain (mjx_arm.DOMAINS)",
+    )
+    return p
+
+
+@dataclasses.dataclass
+class Stage:
+    """What a fine-tune stage's CLI loaded: its translators (each file read once), the arms, the
+    output folder and the run record every written file carries."""
+
+    seeds: list[int]
+    sources: list[tuple[dict, dict]]
+    translators: list[Translator]
+    arm_s: object
+    arm_c: object
+    out: Path
+    run: dict
+
+    def write(self, params, per_seed_meta: list[dict], history: dict, json_name: str) -> None:
+        """Writes each seed's translator file (G_c replaced, the stage's record added to its
+        metadata) and the history, atomically."""
+        for s_i, (seed, source) in enumerate(zip(self.seeds, self.sources, strict=True)):
+            meta = self.run | {"seed": seed} | per_seed_meta[s_i]
+            tree, file_meta = finetuned_checkpoint(source, params[s_i], meta)
+            names = [f"translator_seed{seed}.ckpt"] + (["translator.ckpt"] if s_i == 0 else [])
+            for name in names:
+                checkpoint.save(self.out / name, tree, file_meta)
+        tmp = self.out / f"{json_name}.tmp"
+        tmp.write_text(json.dumps(self.run | {"history": history}, indent=2))
+        tmp.replace(self.out / json_name)
+
+
+def trained_model_hash(meta: dict) -> str | None:
+    """The `Arm.model_hash` a translator file says it was trained or last refined on, or None
+    (files written before the hash was recorded)."""
+    return meta.get("finetune", {}).get("model_hash") or meta.get("model_hash")
+
+
+def start_stage(p: argparse.ArgumentParser, a, module: str, config: dict, argv) -> Stage:
+    """Checks and loads what `stage_parser`'s flags name; `module` and `config` go into the run
+    record. Every problem (seeds, output folder, an unreadable translator or MJCF, translators
+    recorded on another arm) is a usage error (status 2) before any simulation starts."""
+    import jax
+
+    from mjx_arm.machine import cpu_model, enable_compilation_cache
+
+    seeds = a.seeds if a.seeds is not None else list(range(len(a.translators)))
+    if len(seeds) != len(a.translators):
+        p.error("give one seed per translator file")
+    if len(set(seeds)) != len(seeds):
+        p.error(f"--seeds must be distinct, got {seeds}")
+    check_output_dir(p, "--out", a.out)
+    try:
+        sources = [checkpoint.load(path) for path in a.translators]  # read once, rewritten often
+        translators = [
+            translator_from_checkpoint(src, path)
+            for src, path in zip(sources, a.translators, strict=True)
+        ]
+    except checkpoint.CheckpointError as err:
+        p.error(f"--translators: {err}")
+    try:
+        arm_s, arm_c = (mjx_arm.load(a.model, domain=d) for d in ("source", a.domain))
+    except (FileNotFoundError, ValueError) as err:  # ModelValidationError is a ValueError
+        p.error(f"--model {a.model}: {err}")
+    for path, (_, meta) in zip(a.translators, sources, strict=True):
+        trained = trained_model_hash(meta)
+        if trained is not None and trained != arm_c.model_hash:
+            p.error(
+                f"{path} was trained on the arm with model hash {trained}, but --model"
+                f" {a.model} has {arm_c.model_hash}"
+            )
+    enable_compilation_cache()
+    out = Path(a.out)
+    out.mkdir(parents=True, exist_ok=True)
+    dev = jax.devices()[0]
+    run = {
+        "command": f"python -m {module} " + " ".join(argv if argv is not None else sys.argv[1:]),
+        "machine": f"{cpu_model()}; JAX device: {dev.platform} ({dev.device_kind})",
+        "config": config,
+        "model": str(a.model),
+        "model_hash": arm_c.model_hash,
+        "domain": a.domain,
+        "sources": [str(x) for x in a.translators],
+        "seeds": seeds,
+    }
+    return Stage(seeds, sources, translators, arm_s, arm_c, out, run)
