@@ -17,6 +17,7 @@ import csv
 import dataclasses
 import json
 import os
+import shutil
 import warnings
 from pathlib import Path
 
@@ -317,6 +318,24 @@ def train_forward_models(fconf: ForwardConfig, data: TranslationData, workdir: P
     return report
 
 
+FORWARD_FILES = ("forward_s.ckpt", "forward_c.ckpt", "forward_metrics.json")
+
+
+def copy_forward_models(parser, source: Path, workdir: Path, f_meta: dict) -> None:
+    """Copies F_s, F_c and their metrics from another workdir, after checking that they were
+    trained on this data with these settings (a usage error otherwise, before any training)."""
+    missing = [name for name in FORWARD_FILES if not (source / name).is_file()]
+    if missing:
+        parser.error(f"--forward-from {source}: no {', '.join(missing)} there")
+    for name in ("forward_s.ckpt", "forward_c.ckpt"):
+        try:
+            checkpoint.load(source / name, expect=f_meta)
+        except checkpoint.CheckpointError as err:
+            parser.error(f"--forward-from: {err}")
+    for name in FORWARD_FILES:
+        shutil.copy2(source / name, workdir / name)
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The options of `python -m ccgan.train`."""
     parser = cli_parser("ccgan.train", __doc__)
@@ -335,6 +354,16 @@ def build_parser() -> argparse.ArgumentParser:
         help="train afresh instead of continuing from the workdir's checkpoints",
     )
     parser.add_argument("--no-progress", action="store_true", help="no progress bars")
+    parser.add_argument(
+        "--forward-only", action="store_true", help="train F_s and F_c, then stop (no GAN)"
+    )
+    parser.add_argument(
+        "--forward-from",
+        metavar="DIR",
+        default=None,
+        help="take F_s and F_c from DIR (a --forward-only workdir) instead of training them;"
+        " they must have been trained on the same data with the same --forward-* options",
+    )
     add_config_flags(parser, ForwardConfig, prefix="forward-")
     add_config_flags(parser, TrainConfig, choices={"feedback_impl": FEEDBACK_IMPLS})
     return parser
@@ -380,9 +409,13 @@ def main(argv=None) -> None:
     workdir.mkdir(parents=True, exist_ok=True)
     f_meta = {"config": dataclasses.asdict(fconf), "data": data_fingerprint(data)}
     fc_path = workdir / "forward_c.ckpt"
-    if args.no_resume or not fc_path.exists():
+    if args.forward_from is not None:
+        copy_forward_models(parser, Path(args.forward_from), workdir, f_meta)
+    elif args.no_resume or not fc_path.exists():
         train_forward_models(fconf, data, workdir, progress=not args.no_progress)
     fc_params, _ = checkpoint.load(fc_path, expect=f_meta)
+    if args.forward_only:
+        return
     train_and_evaluate(
         config,
         data,

@@ -422,3 +422,29 @@ def test_changed_config_names_the_differing_fields(tmp_path):
     assert "config.nested.a: stored [1, 2], this run [1, 3]" in msg
     assert "config.new: not stored, this run 1" in msg
     assert "epochs" not in msg  # unchanged fields are not listed
+
+
+def test_forward_models_trained_once_serve_other_runs_only_when_they_fit(
+    tmp_path, files, small_arm, capsys
+):
+    model, _ = small_arm
+    data = ["--source", files["s"], "--constrained", files["c"], "--model", model, *TINY_TRAIN]
+    forward_dir, run = tmp_path / "forward", tmp_path / "run"
+    train_lib.main([*data, "--workdir", str(forward_dir), "--forward-only"])
+    assert {p.name for p in forward_dir.iterdir()} == set(train_lib.FORWARD_FILES)
+    # Other forward settings than those F_c was trained with: refused before any training.
+    err = usage_error(
+        train_lib.main,
+        [*data, "--forward-hidden", "8", "--workdir", str(run), "--forward-from", str(forward_dir)],
+        capsys,
+    )
+    assert "--forward-from" in err and "hidden" in err
+    assert not (run / "forward_c.ckpt").exists()
+    err = usage_error(
+        train_lib.main, [*data, "--workdir", str(run), "--forward-from", str(tmp_path)], capsys
+    )
+    assert "forward_c.ckpt" in err
+    train_lib.main([*data, "--workdir", str(run), "--forward-from", str(forward_dir)])
+    copied = (run / "forward_c.ckpt").read_bytes()
+    assert copied == (forward_dir / "forward_c.ckpt").read_bytes()
+    assert (run / "translator.ckpt").exists()

@@ -191,3 +191,20 @@ def test_report_checks_each_target_shape_by_shape():
     assert "translator is lower on 0 of 5" in lines[4]
     table = report.paper_lines(results)
     assert "| circle | 2.98 / 0.276 | 7.14 / 0.636 | 0.90 / 0.100 |" in "\n".join(table)
+
+
+def test_quick_chain_runs_end_to_end_then_skips_everything(tmp_path, capsys):
+    """The committed quick config, every stage for real (tiny babbling, training, distillation,
+    evaluation), then the same command again: nothing reruns."""
+    config = paper.REPO / "experiments" / "quick.json"
+    argv = ["--out", str(tmp_path / "run"), "--config", str(config)]
+    assert paper.main(argv) == 0
+    text = (tmp_path / "run" / "paper.md").read_text()
+    assert "| circle | 2.98 / 0.276 | 7.14 / 0.636 |" in text
+    assert "the five shapes were used only for the tables below" in text
+    _, stages = load_config(config)
+    chain = Chain(stages, tmp_path / "run", paper.REPO)
+    assert all(chain.status(s.name) == "done" for s in stages)
+    capsys.readouterr()
+    assert paper.main(argv) == 0
+    assert capsys.readouterr().out.count("skipped") == len(stages)
