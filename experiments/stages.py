@@ -30,6 +30,7 @@ import sys
 import time
 from pathlib import Path
 
+from mjx_arm.dataset import sha256_file
 from mjx_arm.machine import cpu_model
 
 MANIFEST = "stage.json"
@@ -123,14 +124,6 @@ def load_config(path: str | os.PathLike) -> tuple[dict, list[Stage]]:
     if not stages:
         raise StageError(f"{path}: no stages")
     return config, stages
-
-
-def sha256_file(path: Path) -> str:
-    digest = hashlib.sha256()
-    with open(path, "rb") as f:
-        for block in iter(lambda: f.read(1 << 20), b""):
-            digest.update(block)
-    return digest.hexdigest()
 
 
 def file_hashes(folder: Path) -> dict[str, str]:

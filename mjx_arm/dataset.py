@@ -290,7 +290,8 @@ def load_dataset(path: str | os.PathLike, expected_model_hash: str | None = None
 # ---------------------------------------------------------------------------------- folders
 
 
-def _sha256(path: Path) -> str:
+def sha256_file(path: Path) -> str:
+    """The hex sha256 of a file, read in 1 MiB blocks."""
     digest = hashlib.sha256()
     with open(path, "rb") as f:
         for block in iter(lambda: f.read(1 << 20), b""):
@@ -319,7 +320,7 @@ def build_manifest(folder: str | os.PathLike) -> dict[str, Any]:
     for path in sorted(folder.glob("*.npz")):
         ds = load_dataset(path)
         files[path.name] = {
-            "sha256": _sha256(path),
+            "sha256": sha256_file(path),
             "bytes": path.stat().st_size,
             "domain": ds.domain,
             "split": ds.split,
@@ -401,7 +402,7 @@ def _check_membership(path: Path, meta: dict[str, Any], arrays: dict[str, np.nda
         name
         for name, listed in files.items()
         if (folder / name).stat().st_size != listed["bytes"]
-        or _sha256(folder / name) != listed["sha256"]
+        or sha256_file(folder / name) != listed["sha256"]
     ]
     if changed:
         raise DatasetError(
