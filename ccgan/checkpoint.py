@@ -176,3 +176,25 @@ def load(
         if want_shapes != have_shapes:
             raise CheckpointError(f"{path}: array shapes differ from the expected tree")
     return tree, meta
+
+
+#: The name `ccgan.load_translator` and `eval` read for a folder's first trained seed.
+FIRST_SEED_NAME = "translator.ckpt"
+
+
+def link_first_seed(folder: str | os.PathLike, seed_file: str) -> Path:
+    """Makes `folder/translator.ckpt` name `seed_file` (a file in the same folder).
+
+    A relative symbolic link, so the folder holds each trained model once and can be moved whole;
+    where links are not allowed, a copy. Replaced atomically, so a reader never sees it missing.
+    """
+    folder = Path(folder)
+    link = folder / FIRST_SEED_NAME
+    tmp = folder / f".{FIRST_SEED_NAME}.{os.getpid()}.tmp"
+    try:
+        tmp.unlink(missing_ok=True)
+        os.symlink(seed_file, tmp)
+    except OSError:
+        tmp.write_bytes((folder / seed_file).read_bytes())
+    os.replace(tmp, link)
+    return link

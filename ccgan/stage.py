@@ -217,9 +217,8 @@ class Stage:
         for s_i, (seed, source) in enumerate(zip(self.seeds, self.sources, strict=True)):
             meta = self.run | {"seed": seed} | per_seed_meta[s_i]
             tree, file_meta = finetuned_checkpoint(source, params[s_i], meta)
-            names = [f"translator_seed{seed}.ckpt"] + (["translator.ckpt"] if s_i == 0 else [])
-            for name in names:
-                checkpoint.save(self.out / name, tree, file_meta)
+            checkpoint.save(self.out / f"translator_seed{seed}.ckpt", tree, file_meta)
+        checkpoint.link_first_seed(self.out, f"translator_seed{self.seeds[0]}.ckpt")
         tmp = self.out / f"{json_name}.tmp"
         tmp.write_text(json.dumps(self.run | {"history": history}, indent=2))
         tmp.replace(self.out / json_name)

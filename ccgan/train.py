@@ -255,7 +255,7 @@ def _save_translators(
     forward_model: ForwardModel | None,
     model_hash: str | None,
 ) -> None:
-    """Writes `translator_seed{s}.ckpt` per seed and `translator.ckpt` (the first seed).
+    """Writes `translator_seed{s}.ckpt` per seed; `translator.ckpt` links to the first seed's.
 
     `state` is the trained TrainState of every seed [S, ...]; the other arguments are as
     `train_and_evaluate`'s, recorded in each file for `ccgan.load_translator`.
@@ -264,18 +264,17 @@ def _save_translators(
 
     for s_i, seed in enumerate(seeds):
         one = jax.tree.map(lambda x, i=s_i: np.asarray(x)[i], state)
-        names = [f"translator_seed{seed}.ckpt"] + (["translator.ckpt"] if s_i == 0 else [])
-        for name in names:
-            save_translator(
-                workdir / name,
-                generator(one.params, 0),
-                int(one.k),
-                data.bounds,
-                config,
-                forward_c_params,
-                forward_model,
-                model_hash=model_hash,
-            )
+        save_translator(
+            workdir / f"translator_seed{seed}.ckpt",
+            generator(one.params, 0),
+            int(one.k),
+            data.bounds,
+            config,
+            forward_c_params,
+            forward_model,
+            model_hash=model_hash,
+        )
+    checkpoint.link_first_seed(workdir, f"translator_seed{seeds[0]}.ckpt")
 
 
 def load_npz(*paths: str | os.PathLike):

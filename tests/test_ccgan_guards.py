@@ -447,4 +447,18 @@ def test_forward_models_trained_once_serve_other_runs_only_when_they_fit(
     train_lib.main([*data, "--workdir", str(run), "--forward-from", str(forward_dir)])
     copied = (run / "forward_c.ckpt").read_bytes()
     assert copied == (forward_dir / "forward_c.ckpt").read_bytes()
-    assert (run / "translator.ckpt").exists()
+    # The first seed's model is stored once: translator.ckpt names translator_seed0.ckpt.
+    assert (run / "translator.ckpt").resolve() == (run / "translator_seed0.ckpt").resolve()
+
+
+def test_first_seed_link_replaces_a_copy_and_follows_the_seed(tmp_path):
+    (tmp_path / "translator_seed3.ckpt").write_bytes(b"seed 3")
+    (tmp_path / "translator.ckpt").write_bytes(b"an old copy")
+    checkpoint.link_first_seed(tmp_path, "translator_seed3.ckpt")
+    assert (tmp_path / "translator.ckpt").read_bytes() == b"seed 3"
+    (tmp_path / "translator_seed3.ckpt").write_bytes(b"seed 3, rewritten")
+    assert (tmp_path / "translator.ckpt").read_bytes() == b"seed 3, rewritten"
+    assert sorted(p.name for p in tmp_path.iterdir()) == [
+        "translator.ckpt",
+        "translator_seed3.ckpt",
+    ]
