@@ -32,10 +32,11 @@ Methods:
            took 500 s on a 2-core CPU, compile included (results/full at commit 7e006b8); on an H200
            the first step took 98 s and each further one 11.6 s (bench/results/h200/oracle.md).
 
-A translator checkpoint is read by `ccgan.translator` (one class for every learned translator);
-`Translator` here only adds what the evaluation needs on top of any object with a `translate`:
-the seed (a sampling translator draws with it, one trained model per seed is picked by it), a
-check of the commands' shape, and the arms its files record.
+A translator checkpoint is read by `ccgan.translator.Translator`, the one translator class.
+`TranslatorMethod` is not a translator: it is an evaluation method backed by one, adding what the
+evaluation needs on top of any object with a `translate`: the seed (a sampling translator draws
+with it, one trained model per seed is picked by it), a check of the commands' shape, and the
+arms its files record.
 """
 
 from __future__ import annotations
@@ -86,8 +87,8 @@ def translator_source(method: str, cfg) -> tuple[Path, bool]:
     return Path(given or default), given is not None
 
 
-class Translator:
-    """A loaded translator method: `translate(p_s [T, 3], poses_s [T, 6], seed)`.
+class TranslatorMethod:
+    """An evaluation method backed by translators: `translate(p_s [T, 3], poses_s [T, 6], seed)`.
 
     With `trained_seeds` ({seed: translator}, several independently trained models) the seed
     picks the model, so a method's mean ± std spans training seeds. `model_hashes` holds the
@@ -131,14 +132,14 @@ class Translator:
         return commands, k
 
 
-def load_translator(method: str, cfg) -> tuple[Translator | None, str]:
+def load_translator(method: str, cfg) -> tuple[TranslatorMethod | None, str]:
     """Loads a translator method's checkpoint (`translator_source`) with `ccgan.load_translator`.
 
     Only a default checkpoint may be absent: then (None, a note naming the file and the flag that
     gives another). One that was asked for (`translator_source`) and is absent, or any that does
     not load, raises, so a run never reports a table without the method it was asked to score.
     The arms the files record (`ccgan.finetune.trained_model_hash`) go into
-    `Translator.model_hashes`, for `check_translator_arms`.
+    `TranslatorMethod.model_hashes`, for `check_translator_arms`.
 
     Args:
       method: one of TRANSLATOR_METHODS.
@@ -183,7 +184,7 @@ def load_translator(method: str, cfg) -> tuple[Translator | None, str]:
         if all(f.exists() for f in files.values()):
             seeds = {s: checked(f) for s, f in files.items()}
             why = f"loaded, trained seeds {list(cfg.seeds)}"
-    return Translator(method, obj, seeds, frozenset(hashes - {None})), why
+    return TranslatorMethod(method, obj, seeds, frozenset(hashes - {None})), why
 
 
 def check_translator_arms(translators: dict, arm) -> None:
@@ -202,7 +203,7 @@ def check_translator_arms(translators: dict, arm) -> None:
             )
 
 
-def forward_model(translators: dict[str, Translator]):
+def forward_model(translators: dict[str, TranslatorMethod]):
     """The CCGAN-GP checkpoint's translator when it carries a learned forward model F_c
     (`predict_poses(commands [N, 3] bar, pose0 [6]) -> poses [N, 6]`), else None.
 
@@ -215,7 +216,7 @@ def forward_model(translators: dict[str, Translator]):
     return model
 
 
-def method_seeds(method: str, translators: dict[str, Translator], seeds) -> list[int]:
+def method_seeds(method: str, translators: dict[str, TranslatorMethod], seeds) -> list[int]:
     """The seeds a method runs: all of `seeds` for a translator that takes one (it samples, or
     has one trained model per seed), else the first only (the method is deterministic)."""
     stochastic = method in translators and translators[method].takes_seed
@@ -227,7 +228,7 @@ def method_commands(
     pressures_s: np.ndarray,
     poses_s: np.ndarray,
     seed: int,
-    translators: dict[str, Translator],
+    translators: dict[str, TranslatorMethod],
     k_stretch: int,
     mpc_commands: np.ndarray | None = None,
 ) -> tuple[np.ndarray, int]:

@@ -27,7 +27,7 @@ from eval.methods import (
     DEFAULT_METHODS,
     METHODS,
     TRANSLATOR_METHODS,
-    Translator,
+    TranslatorMethod,
     check_translator_arms,
     load_translator,
     translator_source,
@@ -56,8 +56,7 @@ RESULTS_DIR = "results"
 RUNS_DIR = "runs"
 #: What the report says of the arm at constants.SOLID_MODEL_PATH.
 SOLID_ARM_NOTE = (
-    "the old solid-disc arm, on which the committed translators (results/translators/) were"
-    " trained"
+    "the old solid-disc arm, on which the committed translators (results/translators/) were trained"
 )
 
 
@@ -332,11 +331,11 @@ def _load(cfg: EvalConfig, run: RunLog) -> tuple:
     folder, made only once every translator has loaded and matches the D_c arm.
 
     Returns:
-      (cfg with out_dir set to the folder made, D_s arm, D_c arm, {method: Translator},
+      (cfg with out_dir set to the folder made, D_s arm, D_c arm, {method: TranslatorMethod},
       `model_description(cfg)`).
     """
     t0 = time.perf_counter()
-    translators: dict[str, Translator] = {}
+    translators: dict[str, TranslatorMethod] = {}
     for method in (m for m in TRANSLATOR_METHODS if m in cfg.methods):
         tr, why = load_translator(method, cfg)
         if tr is None:

@@ -20,7 +20,7 @@ from tqdm import tqdm
 import mjx_arm  # (before jax: sets the XLA CPU flag)
 from eval.methods import (
     TRANSLATOR_METHODS,
-    Translator,
+    TranslatorMethod,
     forward_model,
     method_commands,
     method_seeds,
@@ -110,7 +110,7 @@ class Plan:
     """The `eval.pipeline.EvalConfig` run (not imported: the pipeline imports this module)."""
     arm_s: mjx_arm.Arm
     arm_c: mjx_arm.Arm
-    translators: dict[str, Translator]
+    translators: dict[str, TranslatorMethod]
     methods: list[str]
     """cfg.methods less the translators that were skipped."""
     k_stretch: int
