@@ -242,6 +242,61 @@ def _move_aside(folder: Path) -> Path:
     return aside
 
 
+def _attempts_to_continue(chain: Chain, name: str, key: dict, redo: bool, log) -> list[dict]:
+    """The earlier attempts of a partial folder started with this key; a folder started with
+    another key is refused, or with `redo` moved aside (then no attempts)."""
+    started_key, attempts = _started_with(chain.attempts_path(name))
+    if started_key is None or started_key == key:
+        return attempts
+    partial = chain.partial(name)
+    if not redo:
+        raise StageError(
+            f"{partial} was started with other inputs: remove it or give --redo {name}"
+        )
+    if partial.exists():
+        log(f"[{name}] the unfinished folder is kept as {_move_aside(partial).name}")
+    return []
+
+
+def _run_attempt(
+    chain: Chain, name: str, key: dict, attempts: list[dict], deadline_s: float | None
+) -> int:
+    """Runs the stage's command into its partial folder; returns its exit status.
+
+    The attempt (start, wall time) is recorded beside the folder before the command starts, so a
+    machine lost mid-stage still leaves the key the folder belongs to, and again when it ends.
+    """
+    attempt = {"started": datetime.datetime.now().isoformat(timespec="seconds"), "wall_s": None}
+    attempts.append(attempt)
+    path = chain.attempts_path(name)
+
+    def record() -> None:
+        path.write_text(json.dumps({"key": key, "attempts": attempts}, indent=1) + "\n")
+
+    record()
+    start = time.perf_counter()
+    process = subprocess.Popen(chain.command(name, chain.partial(name)), cwd=chain.repo)
+    try:
+        return process.wait(timeout=deadline_s)
+    except subprocess.TimeoutExpired:
+        process.terminate()
+        try:
+            process.wait(timeout=STOP_GRACE_S)
+        except subprocess.TimeoutExpired:
+            process.kill()
+            process.wait()
+        raise DeadlineReached(
+            f"stage {name} stopped at the deadline; rerun to continue it"
+        ) from None
+    except BaseException:
+        process.kill()
+        process.wait()
+        raise
+    finally:
+        attempt["wall_s"] = round(time.perf_counter() - start, 1)
+        record()
+
+
 def run_stage(
     chain: Chain, name: str, redo: bool = False, deadline_s: float | None = None, log=print
 ) -> dict:
@@ -267,50 +322,13 @@ def run_stage(
         )
     key = chain.key(name)
     partial = chain.partial(name)
-    attempts_path = chain.attempts_path(name)
-    started_key, attempts = _started_with(attempts_path)
-    if started_key is not None and started_key != key:
-        if not redo:
-            raise StageError(
-                f"{partial} was started with other inputs: remove it or give --redo {name}"
-            )
-        if partial.exists():
-            log(f"[{name}] the unfinished folder is kept as {_move_aside(partial).name}")
-        attempts = []
+    attempts = _attempts_to_continue(chain, name, key, redo, log)
     partial.mkdir(parents=True, exist_ok=True)
-    argv = chain.command(name, partial)
-    # As a person would run it by hand: into the stage's folder (this run writes to .partial
-    # first and renames it into place).
+    # Shown as a person would run it by hand: into the stage's folder (this run writes to
+    # .partial first and renames it into place).
     shown = shlex.join(["python", *chain.command(name, chain.folder(name))[1:]])
     log(f"[{name}] {stage.about}\n[{name}] $ {shown}")
-    attempt = {"started": datetime.datetime.now().isoformat(timespec="seconds"), "wall_s": None}
-    attempts.append(attempt)
-
-    def record() -> None:
-        attempts_path.write_text(json.dumps({"key": key, "attempts": attempts}, indent=1) + "\n")
-
-    record()  # a machine lost mid-stage still leaves the key the partial folder belongs to
-    start = time.perf_counter()
-    process = subprocess.Popen(argv, cwd=chain.repo)
-    try:
-        rc = process.wait(timeout=deadline_s)
-    except subprocess.TimeoutExpired:
-        process.terminate()
-        try:
-            process.wait(timeout=STOP_GRACE_S)
-        except subprocess.TimeoutExpired:
-            process.kill()
-            process.wait()
-        raise DeadlineReached(
-            f"stage {name} stopped at the deadline; rerun to continue it"
-        ) from None
-    except BaseException:
-        process.kill()
-        process.wait()
-        raise
-    finally:
-        attempt["wall_s"] = round(time.perf_counter() - start, 1)
-        record()
+    rc = _run_attempt(chain, name, key, attempts, deadline_s)
     if rc != 0:
         raise StageError(
             f"stage {name} failed (exit status {rc}); {partial} is kept, and a rerun with the "
@@ -331,7 +349,7 @@ def run_stage(
     if target.exists():
         log(f"[{name}] the earlier folder is kept as {_move_aside(target).name}")
     partial.rename(target)
-    attempts_path.unlink()
+    chain.attempts_path(name).unlink()
     log(f"[{name}] finished in {manifest['wall_s']:.0f} s")
     return manifest
 
