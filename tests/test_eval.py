@@ -4,17 +4,20 @@ test_tracking, test_tracking_mpc)."""
 
 import dataclasses
 import json
-from pathlib import Path
 
 import numpy as np
 import pytest
 
 import mjx_arm  # (before jax)
+from ccgan.translator import DEFAULT_PATH
 from eval import methods, pipeline, render, report, simulate
 from mjx_arm import programs
 from tracking import held, metrics, mpc
 from tracking.metrics import tracking_loss
 from tracking.oracle import OracleConfig
+
+#: The committed CCGAN-GP translator (a link to its first seed's file).
+SHIPPED_TRANSLATOR = DEFAULT_PATH
 
 
 @pytest.fixture(scope="module")
@@ -51,13 +54,7 @@ def test_tiny_end_to_end(small_xml, tmp_path, capsys):
 
     # A WCGAN-GP stand-in with one model per training seed (copies of the shipped translator),
     # so the per-seed path runs through the table, the noise and the periodicity tests.
-    shipped = (
-        Path(__file__).resolve().parent.parent
-        / "results"
-        / "translators"
-        / "ccgan"
-        / "translator.ckpt"
-    )
+    shipped = SHIPPED_TRANSLATOR
     (tmp_path / "wcgan").mkdir()
     for name in ("translator.ckpt", "translator_seed0.ckpt", "translator_seed1.ckpt"):
         shutil.copy(shipped, tmp_path / "wcgan" / name)
@@ -124,13 +121,7 @@ def test_translator_per_trained_seed(tmp_path):
     """translator_seed{s}.ckpt beside the checkpoint: one trained model per evaluation seed."""
     import shutil
 
-    shipped = (
-        Path(__file__).resolve().parent.parent
-        / "results"
-        / "translators"
-        / "ccgan"
-        / "translator.ckpt"
-    )
+    shipped = SHIPPED_TRANSLATOR
     for name in ("translator.ckpt", "translator_seed0.ckpt", "translator_seed1.ckpt"):
         shutil.copy(shipped, tmp_path / name)
     path = str(tmp_path / "translator.ckpt")
@@ -149,13 +140,7 @@ def test_default_translator_finds_its_trained_seeds(tmp_path, monkeypatch):
     """Without --ccgan-path the loader's default checkpoint is used, with its per-seed files."""
     import shutil
 
-    shipped = (
-        Path(__file__).resolve().parent.parent
-        / "results"
-        / "translators"
-        / "ccgan"
-        / "translator.ckpt"
-    )
+    shipped = SHIPPED_TRANSLATOR
     for name in ("translator.ckpt", "translator_seed0.ckpt", "translator_seed1.ckpt"):
         shutil.copy(shipped, tmp_path / name)
     monkeypatch.setenv("CCGAN_TRANSLATOR", str(tmp_path / "translator.ckpt"))
