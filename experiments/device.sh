@@ -7,9 +7,10 @@
 #
 # Each call: installs the carried wheels (bench/device/install.sh); restores the run folder from
 # a carried .paper_state/paper_state.tar.gz when the machine does not hold it already; runs
-# `python -m experiments.paper --out $TMP/paper --deadline-s ${DEADLINE_S:-540}` (a stage
-# stopped at the deadline keeps its folder and continues in the next call); puts into $OUT the
-# whole run folder as paper_state.tar.gz, plus paper.md and the log.
+# `python -m experiments.paper --out $TMP/paper --jobs ${JOBS:-4} --deadline-s ${DEADLINE_S:-540}`
+# (up to JOBS stages share the GPU; a stage stopped at the deadline keeps its folder and continues
+# in the next call); puts into $OUT the whole run folder as paper_state.tar.gz, plus paper.md and
+# the log.
 #
 # Sequence of `run` calls (nvidia-h100-x1 or nvidia-h200; timeout_s 600):
 #   1. carry [".whl"]:   bash experiments/device.sh
@@ -30,12 +31,19 @@ fi
 [[ ${RUN:-1} == 0 ]] && exit 0
 nvidia-smi --query-gpu=name,memory.total,driver_version --format=csv,noheader || true
 CONFIG=${CONFIG:-experiments/paper.json} # experiments/quick.json rehearses the calls anywhere
-$PY -m experiments.paper --out "$RUN_DIR" --config "$CONFIG" --deadline-s "${DEADLINE_S:-540}" 2>&1 |
+# GPU use every 15 s, to see how well the stages share the GPU (appended over calls).
+nvidia-smi --query-gpu=timestamp,utilization.gpu,memory.used --format=csv,noheader -l 15 \
+  >>"$TMP/gpu_use.csv" 2>/dev/null &
+sampler=$!
+$PY -m experiments.paper --out "$RUN_DIR" --config "$CONFIG" --jobs "${JOBS:-4}" \
+  --deadline-s "${DEADLINE_S:-540}" 2>&1 |
   tee -a "$TMP/paper_log.txt"
 rc=${PIPESTATUS[0]}
+kill $sampler 2>/dev/null
 $PY -m experiments.paper --out "$RUN_DIR" --config "$CONFIG" --list
 tar -czf "$OUT/paper_state.tar.gz" -C "$TMP" paper
 cp -f "$TMP/paper_log.txt" "$OUT/log.txt"
+[[ -f $TMP/gpu_use.csv ]] && cp -f "$TMP/gpu_use.csv" "$OUT/"
 [[ -f $RUN_DIR/paper.md ]] && cp -f "$RUN_DIR/paper.md" "$OUT/"
 echo "experiments.paper exit status $rc (3: stopped at the deadline, call again); in \$OUT: $(ls "$OUT" | tr '\n' ' ')"
 exit $rc

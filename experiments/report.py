@@ -31,8 +31,8 @@ def _hms(seconds: float) -> str:
 def stage_lines(chain: Chain) -> list[str]:
     """The stages: what each made, where it ran, its wall time over its attempts, its command."""
     lines = [
-        "| stage | what | wall time | attempts | machine |",
-        "|---|---|---|---|---|",
+        "| stage | what | wall time | attempts | stages at once | machine |",
+        "|---|---|---|---|---|---|",
     ]
     total = 0.0
     for name in chain.stages:
@@ -40,9 +40,17 @@ def stage_lines(chain: Chain) -> list[str]:
         total += m["wall_s"]
         lines.append(
             f"| {name} | {m['about']} | {_hms(m['wall_s'])} | {len(m['attempts'])}"
-            f" | {m['machine']} |"
+            f" | up to {max(a.get('jobs', 1) for a in m['attempts'])} | {m['machine']} |"
         )
-    lines += ["", f"Total: {_hms(total)}.", "", "Commands, in order:", ""]
+    lines += [
+        "",
+        f"Sum of the stages' wall times: {_hms(total)}. A stage that shared the machine with"
+        " others ('stages at once' above 1) ran slower than it would alone, and the chain took"
+        " less than this sum.",
+        "",
+        "Commands, in order:",
+        "",
+    ]
     lines += [f"- `{chain.manifest(n)['command']}`" for n in chain.stages]
     return lines
 

@@ -40,6 +40,13 @@ PLACEHOLDER = re.compile(r"\{([a-z_]+)(?::([a-z0-9_]+))?\}")
 
 
 STOP_GRACE_S = 30.0  # a stopped command's time to finish writing a checkpoint
+STAGE_LOG = "stage.log"  # a command's output, when several run at once
+# Environment variables by which a caller already chose how JAX takes GPU memory.
+GPU_MEMORY_POLICY = (
+    "XLA_PYTHON_CLIENT_PREALLOCATE",
+    "XLA_PYTHON_CLIENT_MEM_FRACTION",
+    "XLA_PYTHON_CLIENT_ALLOCATOR",
+)
 
 
 class StageError(RuntimeError):
@@ -163,6 +170,10 @@ class Chain:
         own folder."""
         return self.out / (name + ATTEMPTS_SUFFIX)
 
+    def log_path(self, name: str) -> Path:
+        """The command's output while it runs beside other stages."""
+        return self.out / (name + ".log")
+
     def manifest(self, name: str) -> dict | None:
         path = self.folder(name) / MANIFEST
         if not path.exists():
@@ -258,87 +269,113 @@ def _attempts_to_continue(chain: Chain, name: str, key: dict, redo: bool, log) -
     return []
 
 
-def _run_attempt(
-    chain: Chain, name: str, key: dict, attempts: list[dict], deadline_s: float | None
-) -> int:
-    """Runs the stage's command into its partial folder; returns its exit status.
+class Attempt:
+    """One run of a stage's command into its partial folder, started at construction.
 
     The attempt (start, wall time) is recorded beside the folder before the command starts, so a
     machine lost mid-stage still leaves the key the folder belongs to, and again when it ends.
-    """
-    attempt = {"started": datetime.datetime.now().isoformat(timespec="seconds"), "wall_s": None}
-    attempts.append(attempt)
-    path = chain.attempts_path(name)
-
-    def record() -> None:
-        path.write_text(json.dumps({"key": key, "attempts": attempts}, indent=1) + "\n")
-
-    record()
-    start = time.perf_counter()
-    process = subprocess.Popen(chain.command(name, chain.partial(name)), cwd=chain.repo)
-    try:
-        return process.wait(timeout=deadline_s)
-    except subprocess.TimeoutExpired:
-        process.terminate()
-        try:
-            process.wait(timeout=STOP_GRACE_S)
-        except subprocess.TimeoutExpired:
-            process.kill()
-            process.wait()
-        raise DeadlineReached(
-            f"stage {name} stopped at the deadline; rerun to continue it"
-        ) from None
-    except BaseException:
-        process.kill()
-        process.wait()
-        raise
-    finally:
-        attempt["wall_s"] = round(time.perf_counter() - start, 1)
-        record()
-
-
-def run_stage(
-    chain: Chain, name: str, redo: bool = False, deadline_s: float | None = None, log=print
-) -> dict:
-    """Runs one stage unless it is done; returns its manifest.
 
     Args:
-      deadline_s: seconds the command may run before it is stopped (SIGTERM, then SIGKILL after
-        `STOP_GRACE_S`) and `DeadlineReached` raised; None: no limit.
+      log_path: where the command's stdout and stderr go (appended); None: this process's own.
+      env: the command's environment; None: this process's.
+      jobs: how many stages the run let share the machine (recorded: wall times depend on it).
+    """
+
+    def __init__(
+        self,
+        chain: Chain,
+        name: str,
+        key: dict,
+        attempts: list[dict],
+        log_path: Path | None = None,
+        env: dict | None = None,
+        jobs: int = 1,
+    ):
+        self.chain, self.name, self.key, self.attempts = chain, name, key, attempts
+        self.entry = {"started": datetime.datetime.now().isoformat(timespec="seconds")}
+        self.entry["wall_s"] = None
+        self.entry["jobs"] = jobs  # the most stages the run let share the machine
+        attempts.append(self.entry)
+        self._write()
+        self.start = time.perf_counter()
+        self.log_file = open(log_path, "a") if log_path is not None else None  # noqa: SIM115
+        self.process = subprocess.Popen(
+            chain.command(name, chain.partial(name)),
+            cwd=chain.repo,
+            env=env,
+            stdout=self.log_file,
+            stderr=subprocess.STDOUT if self.log_file else None,
+        )
+
+    def _write(self) -> None:
+        path = self.chain.attempts_path(self.name)
+        path.write_text(json.dumps({"key": self.key, "attempts": self.attempts}, indent=1) + "\n")
+
+    def elapsed_s(self) -> float:
+        return time.perf_counter() - self.start
+
+    def close(self) -> int:
+        """Records the wall time; returns the exit status (the command must have ended)."""
+        self.entry["wall_s"] = round(self.elapsed_s(), 1)
+        self._write()
+        if self.log_file is not None:
+            self.log_file.close()
+        return self.process.returncode
+
+    def stop(self) -> None:
+        """SIGTERM, then SIGKILL after `STOP_GRACE_S`: a training command writes its checkpoint."""
+        self.process.terminate()
+        try:
+            self.process.wait(timeout=STOP_GRACE_S)
+        except subprocess.TimeoutExpired:
+            self.process.kill()
+            self.process.wait()
+        self.close()
+
+
+def _begin(chain: Chain, name: str, redo: bool, log) -> tuple[dict, list[dict]] | None:
+    """Checks a stage before its command runs: None when it is done (skipped), else its key and
+    the attempts it continues.
 
     Raises:
-      StageError: its inputs are not finished, its folder was made from other inputs (without
-        `redo`), or its command failed (the partial folder stays for a resume).
+      StageError: its inputs are not finished, or its folder was made from other inputs (without
+        `redo`).
     """
     stage = chain.stages[name]
     status = chain.status(name)
     if status == "done" and not redo:
         log(f"[{name}] done: skipped (outputs match their inputs)")
-        return chain.manifest(name)
+        return None
     if status == "stale" and not redo:
         raise StageError(
             f"{chain.folder(name)} was made from other inputs (config or upstream outputs "
             f"changed): give --redo {name} to rerun it (the old folder is kept beside it)"
         )
     key = chain.key(name)
-    partial = chain.partial(name)
     attempts = _attempts_to_continue(chain, name, key, redo, log)
-    partial.mkdir(parents=True, exist_ok=True)
-    # Shown as a person would run it by hand: into the stage's folder (this run writes to
-    # .partial first and renames it into place).
-    shown = shlex.join(["python", *chain.command(name, chain.folder(name))[1:]])
-    log(f"[{name}] {stage.about}\n[{name}] $ {shown}")
-    rc = _run_attempt(chain, name, key, attempts, deadline_s)
-    if rc != 0:
-        raise StageError(
-            f"stage {name} failed (exit status {rc}); {partial} is kept, and a rerun with the "
-            "same config continues in it"
-        )
+    chain.partial(name).mkdir(parents=True, exist_ok=True)
+    log(f"[{name}] {stage.about}\n[{name}] $ {shown_command(chain, name)}")
+    return key, attempts
+
+
+def shown_command(chain: Chain, name: str) -> str:
+    """The stage's command as a person would run it by hand: into the stage's folder (the chain
+    writes to .partial first and renames it into place)."""
+    return shlex.join(["python", *chain.command(name, chain.folder(name))[1:]])
+
+
+def _finish(chain: Chain, name: str, key: dict, attempts: list[dict], log) -> dict:
+    """Writes the manifest of a stage whose command succeeded and moves its folder into place;
+    a log kept beside the partial folder moves in with it."""
+    partial = chain.partial(name)
+    log_path = chain.log_path(name)
+    if log_path.exists():
+        log_path.rename(partial / STAGE_LOG)
     manifest = {
         "stage": name,
-        "about": stage.about,
+        "about": chain.stages[name].about,
         "key": key,
-        "command": shown,
+        "command": shown_command(chain, name),
         "machine": machine(),
         "attempts": attempts,
         "wall_s": round(sum(a["wall_s"] or 0.0 for a in attempts), 1),
@@ -352,6 +389,182 @@ def run_stage(
     chain.attempts_path(name).unlink()
     log(f"[{name}] finished in {manifest['wall_s']:.0f} s")
     return manifest
+
+
+def _failed(chain: Chain, name: str, rc: int) -> StageError:
+    return StageError(
+        f"stage {name} failed (exit status {rc}); {chain.partial(name)} is kept, and a rerun "
+        "with the same config continues in it"
+    )
+
+
+def run_stage(
+    chain: Chain, name: str, redo: bool = False, deadline_s: float | None = None, log=print
+) -> dict:
+    """Runs one stage unless it is done, its output shown here; returns its manifest.
+
+    Args:
+      deadline_s: seconds the command may run before it is stopped (SIGTERM, then SIGKILL after
+        `STOP_GRACE_S`) and `DeadlineReached` raised; None: no limit.
+
+    Raises:
+      StageError: its inputs are not finished, its folder was made from other inputs (without
+        `redo`), or its command failed (the partial folder stays for a resume).
+    """
+    begun = _begin(chain, name, redo, log)
+    if begun is None:
+        return chain.manifest(name)
+    attempt = Attempt(chain, name, *begun)
+    try:
+        attempt.process.wait(timeout=deadline_s)
+    except subprocess.TimeoutExpired:
+        attempt.stop()
+        raise DeadlineReached(
+            f"stage {name} stopped at the deadline; rerun to continue it"
+        ) from None
+    except BaseException:
+        attempt.process.kill()
+        attempt.process.wait()
+        attempt.close()
+        raise
+    rc = attempt.close()
+    if rc != 0:
+        raise _failed(chain, name, rc)
+    return _finish(chain, name, *begun, log)
+
+
+def _child_env(jobs: int) -> dict:
+    """The commands' environment. With several at once on one accelerator, each JAX process
+    takes GPU memory as it needs it instead of preallocating most of it (JAX's default), unless
+    the caller chose a policy."""
+    env = dict(os.environ)
+    if jobs > 1 and not any(k in env for k in GPU_MEMORY_POLICY):
+        env["XLA_PYTHON_CLIENT_PREALLOCATE"] = "false"
+    return env
+
+
+def run_stages(
+    chain: Chain,
+    names: list[str],
+    jobs: int = 1,
+    redo: tuple[str, ...] = (),
+    deadline_s: float | None = None,
+    log=print,
+    poll_s: float = 1.0,
+    status_every_s: float = 60.0,
+) -> None:
+    """Runs the named stages, up to `jobs` at once, each as soon as its inputs are done.
+
+    With one job the commands' output is shown here; with more, each command writes
+    `NAME.log` beside its folder (kept in the folder as `stage.log` when it finishes) and a line
+    every `status_every_s` says what runs. After a failure no new stage starts; those running
+    finish. At the deadline every running command is stopped.
+
+    Raises:
+      StageError: a named stage reads a stage that is neither named nor done; a stage's folder
+        was made from other inputs; a command failed (the first failure; all are logged).
+      DeadlineReached: the deadline came first; unfinished stages keep their partial folders.
+    """
+    if jobs < 1:
+        raise ValueError(f"jobs must be at least 1, got {jobs}")
+    for name in names:
+        missing = [n for n in chain.stages[name].inputs if n not in names and not chain.manifest(n)]
+        if missing:
+            raise StageError(f"stage {name} reads {missing}, which have not finished: run them too")
+    if jobs == 1:
+        start = time.monotonic()
+        for i, name in enumerate(names):
+            log(f"== stage {i + 1}/{len(names)}: {name}")
+            left = None if deadline_s is None else deadline_s - (time.monotonic() - start)
+            if left is not None and left <= 0:
+                raise DeadlineReached(f"the deadline came before stage {name}")
+            run_stage(chain, name, redo=name in redo, deadline_s=left, log=log)
+        return
+    _Scheduler(chain, names, jobs, redo, log, _child_env(jobs)).run(
+        deadline_s, poll_s, status_every_s
+    )
+
+
+class _Scheduler:
+    """`run_stages` with several commands at once."""
+
+    def __init__(self, chain, names, jobs, redo, log, env):
+        self.chain, self.jobs, self.redo, self.log, self.env = chain, jobs, redo, log, env
+        self.waiting = list(names)
+        self.running: dict[str, tuple[Attempt, dict, list]] = {}
+        self.failures: list[StageError] = []
+
+    def ready(self) -> list[str]:
+        chain = self.chain
+        return [n for n in self.waiting if all(chain.manifest(i) for i in chain.stages[n].inputs)]
+
+    def launch(self) -> None:
+        """Starts ready stages while there is room; a skipped (done) stage can make others
+        ready at once."""
+        skipped = True
+        while skipped:
+            skipped = False
+            for name in self.ready():
+                if len(self.running) >= self.jobs or self.failures:
+                    return
+                self.waiting.remove(name)
+                begun = _begin(self.chain, name, name in self.redo, self.log)
+                if begun is None:
+                    skipped = True
+                    continue
+                self._start(name, begun)
+
+    def _start(self, name: str, begun: tuple[dict, list[dict]]) -> None:
+        log_path = self.chain.log_path(name)
+        attempt = Attempt(self.chain, name, *begun, log_path=log_path, env=self.env, jobs=self.jobs)
+        self.log(f"[{name}] started; its output goes to {log_path}")
+        self.running[name] = (attempt, *begun)
+
+    def reap(self) -> None:
+        for name, (attempt, key, attempts) in list(self.running.items()):
+            if attempt.process.poll() is None:
+                continue
+            del self.running[name]
+            rc = attempt.close()
+            if rc == 0:
+                _finish(self.chain, name, key, attempts, self.log)
+            else:
+                self.failures.append(_failed(self.chain, name, rc))
+                self.log(f"[{name}] {self.failures[-1]} (log: {self.chain.log_path(name)})")
+
+    def run(self, deadline_s, poll_s, status_every_s) -> None:
+        start = last_status = time.monotonic()
+        try:
+            self.launch()
+            while self.running:
+                time.sleep(poll_s)
+                self.reap()
+                self.launch()
+                now = time.monotonic()
+                if deadline_s is not None and now - start >= deadline_s and self.running:
+                    for attempt, _, _ in self.running.values():
+                        attempt.stop()
+                    names = ", ".join(self.running)
+                    self.running.clear()
+                    raise DeadlineReached(f"stage(s) {names} stopped at the deadline")
+                if now - last_status >= status_every_s:
+                    last_status = now
+                    self.log(
+                        "running: "
+                        + ", ".join(
+                            f"{n} {a.elapsed_s():.0f} s" for n, (a, _, _) in self.running.items()
+                        )
+                    )
+        except BaseException:
+            for attempt, _, _ in self.running.values():
+                attempt.process.kill()
+                attempt.process.wait()
+                attempt.close()
+            raise
+        if self.failures:
+            raise self.failures[0]
+        if self.waiting:
+            raise StageError(f"not run: {', '.join(self.waiting)}")
 
 
 @functools.cache

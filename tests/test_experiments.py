@@ -11,7 +11,14 @@ import textwrap
 import pytest
 
 from experiments import paper, report
-from experiments.stages import Chain, DeadlineReached, StageError, load_config, run_stage
+from experiments.stages import (
+    Chain,
+    DeadlineReached,
+    StageError,
+    load_config,
+    run_stage,
+    run_stages,
+)
 
 FAKE_STAGE = textwrap.dedent(
     """
@@ -28,6 +35,8 @@ FAKE_STAGE = textwrap.dedent(
         time.sleep(float(opt("--sleep")))
     upstream = pathlib.Path(opt("--in"), "out.txt").read_text() if opt("--in") else ""
     (out / "out.txt").write_text(opt("--text") + upstream)
+    (out / "times.txt").write_text(f"{time.time() - float(opt('--sleep') or 0)} {time.time()}")
+    print("done", opt("--text"))
     """
 )
 
@@ -65,7 +74,7 @@ def test_finished_stages_are_skipped_and_record_what_they_made(fake):
     run_all(chain)
     assert (chain.folder("b") / "out.txt").read_text() == "ba"
     manifest = chain.manifest("b")
-    assert manifest["files"].keys() == {"out.txt"}
+    assert manifest["files"].keys() == {"out.txt", "times.txt"}
     assert manifest["key"]["inputs"]["a"] == chain.outputs_digest("a")
     assert "--out run/b " not in manifest["command"] and manifest["command"].endswith("run/b")
     assert not list(chain.out.glob("*.partial")) and not list(chain.out.glob("*.attempts.json"))
@@ -122,6 +131,70 @@ def test_deadline_stops_the_command_and_the_cli_says_so(fake, capsys):
     argv = ["--out", str(chain.out), "--config", str(config), "--deadline-s", "1"]
     assert paper.main(argv) == paper.EXIT_STOPPED
     assert "Rerun the same command" in capsys.readouterr().err
+
+
+def three_stage_chain(tmp_path, a_args="--text a --sleep 2", c_args="--text c --sleep 2"):
+    """a and c independent, b reads a."""
+    config = {
+        "stages": [
+            {"name": "a", "module": "fakestage", "args": f"{a_args} --out {{dir}}"},
+            {"name": "b", "module": "fakestage", "args": "--text b --in {stage:a} --out {dir}"},
+            {"name": "c", "module": "fakestage", "args": f"{c_args} --out {{dir}}"},
+        ]
+    }
+    path = tmp_path / "chain.json"
+    path.write_text(json.dumps(config))
+    _, stages = load_config(path)
+    return Chain(stages, tmp_path / "run", tmp_path)
+
+
+def span(chain, name):
+    start, end = (chain.folder(name) / "times.txt").read_text().split()
+    return float(start), float(end)
+
+
+def test_jobs_run_independent_stages_at_once_and_dependants_after(fake):
+    chain = three_stage_chain(fake)
+    logs = []
+    run_stages(chain, list(chain.stages), jobs=2, log=logs.append, poll_s=0.1)
+    (a0, a1), (b0, _), (c0, c1) = (span(chain, n) for n in "abc")
+    assert max(a0, c0) < min(a1, c1), "a and c did not overlap"
+    assert b0 >= a1
+    assert (chain.folder("b") / "out.txt").read_text() == "ba"
+    # each command's output is kept in its folder, and hashed with it
+    assert (chain.folder("c") / "stage.log").read_text().strip() == "done c"
+    assert "stage.log" in chain.manifest("c")["files"]
+    assert all(chain.manifest(n)["attempts"][0]["jobs"] == 2 for n in "abc")
+    logs.clear()
+    run_stages(chain, list(chain.stages), jobs=2, log=logs.append, poll_s=0.1)
+    assert sum("skipped" in line for line in logs) == 3
+
+
+def test_jobs_after_a_failure_start_nothing_new_but_finish_the_running(fake):
+    chain = three_stage_chain(fake, a_args="--text a --fail-once")
+    with pytest.raises(StageError, match="stage a failed"):
+        run_stages(chain, list(chain.stages), jobs=2, log=lambda _: None, poll_s=0.1)
+    assert chain.status("c") == "done" and chain.status("b") == "todo"
+    assert (chain.partial("a") / "tried").exists() and chain.log_path("a").exists()
+    run_stages(chain, list(chain.stages), jobs=2, log=lambda _: None, poll_s=0.1)
+    assert all(chain.status(n) == "done" for n in "abc")
+    assert len(chain.manifest("a")["attempts"]) == 2
+
+
+def test_jobs_deadline_stops_every_running_stage(fake):
+    chain = three_stage_chain(fake, a_args="--text a --sleep 30", c_args="--text c --sleep 30")
+    with pytest.raises(DeadlineReached, match="a, c"):
+        run_stages(chain, list(chain.stages), jobs=3, deadline_s=1.0, log=lambda _: None)
+    for name in "ac":
+        assert chain.status(name) == "partial"
+        attempts = json.loads(chain.attempts_path(name).read_text())["attempts"]
+        assert attempts[0]["wall_s"] < 30
+
+
+def test_selected_stages_need_their_inputs_done_or_selected(fake):
+    chain = three_stage_chain(fake)
+    with pytest.raises(StageError, match=r"stage b reads \['a'\]"):
+        run_stages(chain, ["b"], jobs=2, log=lambda _: None)
 
 
 @pytest.mark.parametrize(
@@ -195,9 +268,9 @@ def test_report_checks_each_target_shape_by_shape():
 
 def test_quick_chain_runs_end_to_end_then_skips_everything(tmp_path, capsys):
     """The committed quick config, every stage for real (tiny babbling, training, distillation,
-    evaluation), then the same command again: nothing reruns."""
+    evaluation), two at a time, then the same command again: nothing reruns."""
     config = paper.REPO / "experiments" / "quick.json"
-    argv = ["--out", str(tmp_path / "run"), "--config", str(config)]
+    argv = ["--out", str(tmp_path / "run"), "--config", str(config), "--jobs", "2"]
     assert paper.main(argv) == 0
     text = (tmp_path / "run" / "paper.md").read_text()
     assert "| circle | 2.98 / 0.276 | 7.14 / 0.636 |" in text
