@@ -18,6 +18,9 @@ import dataclasses
 import json
 import os
 import shutil
+import signal
+import sys
+import threading
 import warnings
 from pathlib import Path
 
@@ -128,6 +131,7 @@ def train_and_evaluate(
     max_chunks: int | None = None,
     progress: bool = True,
     model_hash: str | None = None,
+    stop=None,
 ):
     """Trains one or several seeds (vmapped), with a CSV log, checkpoints and a translator file.
 
@@ -144,6 +148,8 @@ def train_and_evaluate(
       progress: show a tqdm bar over epochs.
       model_hash: `Arm.model_hash` of the arm the data comes from, recorded in the translator
         files (`ccgan.finetune` and `ccgan.distill` refuse to refine them on another arm).
+      stop: a `threading.Event`; once set, the run checkpoints after the epoch in progress and
+        returns unfinished (no translator files), to be resumed.
 
     Returns:
       (state with a leading seed axis, rows of the metrics CSV).
@@ -166,7 +172,7 @@ def train_and_evaluate(
     done = int(np.asarray(state.epoch)[0])
     bar = tqdm(total=config.epochs, initial=done, unit="epoch", disable=not progress, desc="ccgan")
     record = _chunk_recorder(ckpt_path, csv_path, meta, seeds, rows, bar)
-    state = _run_chunks(trainer, state, run_keys, config, done, max_chunks, record)
+    state = _run_chunks(trainer, state, run_keys, config, done, max_chunks, record, stop)
     bar.close()
     if int(np.asarray(state.epoch)[0]) >= config.epochs:
         _save_translators(
@@ -220,13 +226,17 @@ def _chunk_recorder(ckpt_path: Path, csv_path: Path, meta: dict, seeds, rows: li
     return record
 
 
-def _run_chunks(trainer: Trainer, state, run_keys, config: TrainConfig, done, max_chunks, record):
+def _run_chunks(
+    trainer: Trainer, state, run_keys, config: TrainConfig, done, max_chunks, record, stop=None
+):
     """Runs epochs done.. in chunks of `checkpoint_every` (vmapped over seeds); returns the state.
 
-    Stops after `max_chunks` chunks (None: at config.epochs). `record(start, n, state, metrics)`
-    runs after each chunk. The next chunk is dispatched before the last one's files are written,
-    so the device keeps working while the host saves (JAX dispatch is asynchronous; the arrays
-    are immutable).
+    Stops after `max_chunks` chunks (None: at config.epochs), or after the epoch running when
+    `stop` (a `threading.Event`) is set: the chunk ends there, so a stopped run loses no finished
+    epoch. `record(start, n, state, metrics)` runs after each chunk. Epochs are dispatched one at
+    a time and the host waits for each before the next, so it never runs ahead of a stop; the
+    next chunk starts before the last one's files are written, so the device keeps working while
+    the host saves (JAX dispatch is asynchronous; the arrays are immutable).
     """
     chunk = max(1, config.checkpoint_every)
     run = jax.jit(jax.vmap(trainer.run_epochs, in_axes=(0, 0, None, None)), static_argnums=3)
@@ -235,11 +245,20 @@ def _run_chunks(trainer: Trainer, state, run_keys, config: TrainConfig, done, ma
         starts = starts[:max_chunks]
     pending = None
     for start in starts:
-        n = min(chunk, config.epochs - start)
-        state, metrics = run(state, run_keys, jnp.int32(start), n)
+        parts = []
+        for epoch in range(start, min(start + chunk, config.epochs)):
+            state, metrics = run(state, run_keys, jnp.int32(epoch), 1)
+            parts.append(metrics)
+            if stop is not None:
+                jax.block_until_ready(state)
+                if stop.is_set():
+                    break
+        metrics = jax.tree.map(lambda *m: jnp.concatenate(m, axis=1), *parts)
         if pending is not None:
             record(*pending)
-        pending = (start, n, state, metrics)
+        pending = (start, len(parts), state, metrics)
+        if stop is not None and stop.is_set():
+            break
     if pending is not None:
         record(*pending)
     return state
@@ -415,7 +434,11 @@ def main(argv=None) -> None:
     fc_params, _ = checkpoint.load(fc_path, expect=f_meta)
     if args.forward_only:
         return
-    train_and_evaluate(
+    # SIGTERM (a time limit, experiments.stages at its deadline) stops the run after the epoch in
+    # progress, with a checkpoint to resume from; exit status 143 says it is unfinished.
+    stop = threading.Event()
+    signal.signal(signal.SIGTERM, lambda *_: stop.set())
+    state, _ = train_and_evaluate(
         config,
         data,
         fc_params,
@@ -425,7 +448,13 @@ def main(argv=None) -> None:
         forward_model=fconf.model,
         progress=not args.no_progress,
         model_hash=d_s.model_hash,
+        stop=stop,
     )
+    if int(np.asarray(state.epoch)[0]) < config.epochs:
+        print(
+            f"stopped at epoch {int(np.asarray(state.epoch)[0])}: rerun to resume", file=sys.stderr
+        )
+        sys.exit(128 + signal.SIGTERM)
 
 
 if __name__ == "__main__":

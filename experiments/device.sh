@@ -7,21 +7,24 @@
 #
 # Each call: installs the carried wheels (bench/device/install.sh); restores the run folder from
 # a carried .paper_state/paper_state.tar.gz when the machine does not hold it already; runs
-# `python -m experiments.paper --out $TMP/paper --jobs ${JOBS:-4} --deadline-s ${DEADLINE_S:-540}`
+# `python -m experiments.paper --out $TMP/paper --jobs ${JOBS:-4} --deadline-s ${DEADLINE_S:-500}`
 # (up to JOBS stages share the GPU; a stage stopped at the deadline keeps its folder and continues
-# in the next call); puts into $OUT the whole run folder as paper_state.tar.gz, plus paper.md and
-# the log.
+# in the next call); puts into $OUT the whole run folder as paper_state.tar.gz.part-NN (pieces of
+# 15 MiB: the device returns no larger file) with paper_state.sha256, plus paper.md, the log and
+# the GPU's use sampled every 15 s. The deadline, the 60 s a stopped stage may take to end its
+# epoch and checkpoint (experiments.stages.STOP_GRACE_S), the install and the packing stay under
+# the device's 600 s per call.
 #
 # Sequence of `run` calls (nvidia-h100-x1 or nvidia-h200; timeout_s 600):
 #   1. carry [".whl"]:   bash experiments/device.sh
 #   2.. carry nothing, each within the machine's 30 s warm window: bash experiments/device.sh
 #      (the run folder is still in /tmp/paper), until the command says every stage is done.
 #   If the machine was lost: carry [".whl"] with `RUN=0 bash experiments/device.sh`, then at once
-#   carry [".paper_state"] (a copy of the last returned paper_state.tar.gz; the .whl and the
-#   state do not fit one call beside the ~25 MiB tree) with `bash experiments/device.sh`.
-# Here, after each call: mkdir -p .paper_state && cp FILES_AT/paper_state.tar.gz .paper_state/
-# (git-ignored). Finished: tar -xzf .paper_state/paper_state.tar.gz and commit what the README
-# names (docs/chain.md says which files).
+#   carry [".paper_state"] (the last returned state; the .whl and the state do not fit one call
+#   beside the tree) with `bash experiments/device.sh`.
+# Here, after each call: bash experiments/take_state.sh FILES_AT (joins and checks the pieces into
+# the git-ignored .paper_state/). Finished: bash experiments/take_state.sh FILES_AT runs/ unpacks
+# the run folder too; commit what docs/chain.md names.
 set -uo pipefail
 source "$(dirname "${BASH_SOURCE[0]}")/../bench/device/install.sh" || exit 1
 RUN_DIR=$TMP/paper
@@ -36,12 +39,17 @@ nvidia-smi --query-gpu=timestamp,utilization.gpu,memory.used --format=csv,nohead
   >>"$TMP/gpu_use.csv" 2>/dev/null &
 sampler=$!
 $PY -m experiments.paper --out "$RUN_DIR" --config "$CONFIG" --jobs "${JOBS:-4}" \
-  --deadline-s "${DEADLINE_S:-540}" 2>&1 |
+  --deadline-s "${DEADLINE_S:-500}" 2>&1 |
   tee -a "$TMP/paper_log.txt"
 rc=${PIPESTATUS[0]}
 kill $sampler 2>/dev/null
 $PY -m experiments.paper --out "$RUN_DIR" --config "$CONFIG" --list
-tar -czf "$OUT/paper_state.tar.gz" -C "$TMP" paper
+# The device returns files of at most 16 MiB (8 files, 64 MiB in all): the state travels in
+# pieces of 15 MiB with the whole file's sha256; experiments/take_state.sh joins them here.
+tar -czf "$TMP/paper_state.tar.gz" -C "$TMP" paper
+(cd "$TMP" && sha256sum paper_state.tar.gz) >"$OUT/paper_state.sha256"
+split -b 15M -d "$TMP/paper_state.tar.gz" "$OUT/paper_state.tar.gz.part-"
+rm -f "$TMP/paper_state.tar.gz"
 cp -f "$TMP/paper_log.txt" "$OUT/log.txt"
 [[ -f $TMP/gpu_use.csv ]] && cp -f "$TMP/gpu_use.csv" "$OUT/"
 [[ -f $RUN_DIR/paper.md ]] && cp -f "$RUN_DIR/paper.md" "$OUT/"

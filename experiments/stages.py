@@ -39,7 +39,7 @@ ATTEMPTS_SUFFIX = ".attempts.json"
 PLACEHOLDER = re.compile(r"\{([a-z_]+)(?::([a-z0-9_]+))?\}")
 
 
-STOP_GRACE_S = 30.0  # a stopped command's time to finish writing a checkpoint
+STOP_GRACE_S = 60.0  # a stopped command's time to end its epoch and write a checkpoint
 STAGE_LOG = "stage.log"  # a command's output, when several run at once
 # Environment variables by which a caller already chose how JAX takes GPU memory.
 GPU_MEMORY_POLICY = (

@@ -7,6 +7,7 @@ and one XLA compilation cache, so the three driver runs of the resume test compi
 import dataclasses
 import math
 import os
+import threading
 
 import jax
 import jax.numpy as jnp
@@ -342,6 +343,17 @@ def test_end_to_end_and_resume_equals_uninterrupted(tiny_setup, tmp_path):
     assert _params_equal(resumed.params, full.params)
     assert _params_equal(resumed.opt_gen, full.opt_gen)
     assert [r["epoch"] for r in rows2] == [r["epoch"] for r in rows]
+
+    # Asked to stop (SIGTERM in the CLI) during its first epoch: it checkpoints after that
+    # epoch, off the chunk grid, writes no translator, and the resumed run ends bit for bit.
+    stop = threading.Event()
+    stop.set()
+    stopped, _ = train_lib.train_and_evaluate(
+        TINY, data, fparams, tmp_path / "stopped", stop=stop, **kw
+    )
+    assert int(stopped.epoch[0]) == 1 and not (tmp_path / "stopped" / "translator.ckpt").exists()
+    resumed, _ = train_lib.train_and_evaluate(TINY, data, fparams, tmp_path / "stopped", **kw)
+    assert _params_equal(resumed.params, full.params)
 
     # A run with another config refuses the checkpoint, naming the changed field.
     other = dataclasses.replace(TINY, lambda_cycle=3.0)

@@ -1,0 +1,29 @@
+#!/usr/bin/env bash
+# Runs HERE, after a call of experiments/device.sh: joins the returned pieces of the run folder
+# (paper_state.tar.gz.part-NN), checks them against paper_state.sha256 and keeps the whole file
+# as .paper_state/paper_state.tar.gz, which the next call restores from on a fresh machine.
+#
+#   bash experiments/take_state.sh FILES_AT          # FILES_AT: the folder the call's files lie in
+#   bash experiments/take_state.sh FILES_AT runs/    # and unpack the run folder into runs/paper
+set -euo pipefail
+from=$(cd "${1:?usage: take_state.sh FILES_AT [UNPACK_DIR]}" && pwd)
+root=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
+compgen -G "$from/paper_state.tar.gz.part-*" >/dev/null || {
+  echo "no paper_state.tar.gz.part-* in $from" >&2
+  exit 1
+}
+tmp=$(mktemp -d)
+trap 'rm -rf "$tmp"' EXIT
+cat "$from"/paper_state.tar.gz.part-* >"$tmp/paper_state.tar.gz"
+(cd "$tmp" && sha256sum -c --quiet "$from/paper_state.sha256") || {
+  echo "the joined state does not match $from/paper_state.sha256: .paper_state is unchanged" >&2
+  exit 1
+}
+mkdir -p "$root/.paper_state"
+mv -f "$tmp/paper_state.tar.gz" "$root/.paper_state/paper_state.tar.gz"
+echo "kept $(du -h "$root/.paper_state/paper_state.tar.gz" | cut -f1) in .paper_state/"
+if [[ -n ${2:-} ]]; then
+  mkdir -p "$2"
+  tar -xzf "$root/.paper_state/paper_state.tar.gz" -C "$2"
+  echo "unpacked into $2/paper"
+fi
