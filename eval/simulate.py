@@ -12,6 +12,7 @@ from __future__ import annotations
 import dataclasses
 import threading
 import time
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -29,6 +30,9 @@ from mjx_arm import programs
 from tracking import metrics, mpc
 from tracking import oracle as oracle_lib
 from tracking.held import every_kth, rollout_grouped
+
+#: The oracle's state in the output folder, kept after every Adam step.
+ORACLE_PROGRESS = "oracle_progress.npz"
 
 
 def add_noise(pressures_bar: np.ndarray, std: float, seed: int) -> np.ndarray:
@@ -138,7 +142,9 @@ class Plan:
 
 def start_oracle(plan: Plan, run: RunLog) -> _InThread | None:
     """Step 3: the oracle's start commands, then its optimisation of every shape at once over
-    the first `plan.horizon` source steps.
+    the first `plan.horizon` source steps. Its state is kept in the output folder after every
+    Adam step (`ORACLE_PROGRESS`), so a run stopped part-way and run again into the same folder
+    continues the optimisation.
 
     On an accelerator it runs in a worker thread (JAX releases the GIL) while the translators and
     the MuJoCo C rollouts keep the CPU cores busy. On a CPU the two would fight for the same cores
@@ -167,6 +173,7 @@ def start_oracle(plan: Plan, run: RunLog) -> _InThread | None:
         cfg.oracle,
         cfg.oracle.held,
         True,
+        None if cfg.out_dir is None else Path(cfg.out_dir) / ORACLE_PROGRESS,
         background=jax.default_backend() != "cpu",
     )
 

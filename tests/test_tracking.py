@@ -1,14 +1,17 @@
 """Tests of tracking/: metrics (numpy and JAX), the tracking loss, held commands, the oracle."""
 
+import dataclasses
+
 import jax.numpy as jnp
 import numpy as np
+import optax
 import pytest
 
 import mjx_arm  # (before jax computes: the XLA CPU flag)
 from mjx_arm import programs
 from tracking import held, metrics
 from tracking.config import ConfigError
-from tracking.oracle import OracleConfig, oracle_commands, start_commands
+from tracking.oracle import OracleConfig, _load_progress, oracle_commands, start_commands
 
 
 def test_position_error_by_hand():
@@ -101,7 +104,7 @@ def test_stretch_and_every_kth():
     np.testing.assert_array_equal(held.every_kth(poses, 4)[:, 0], [3, 7, 11])
 
 
-def test_oracle_lowers_the_loss_and_batches_like_one_program(small_xml):
+def test_oracle_lowers_the_loss_and_batches_like_one_program(small_xml, tmp_path):
     """Adam through the MJX rollout: better than its start, in the valve range, and two programs
     optimised together get exactly the iterates each gets alone (Adam acts elementwise)."""
     arm_s = mjx_arm.load(xml=small_xml, domain="source")
@@ -119,9 +122,24 @@ def test_oracle_lowers_the_loss_and_batches_like_one_program(small_xml):
     assert history.shape == (4, 2) and np.isfinite(history).all()
     np.testing.assert_allclose(info["best_loss"], history.min(axis=0))
     assert (history.min(axis=0) < history[0]).all()  # it improved on the stretch program
-    one, info_one = oracle_commands(arm_c, targets[1], inits[1], k, cfg)
+    # One program alone, stopped after two steps with its state in a file, then continued from
+    # the file to four: the same iterates as in the batch.
+    path = tmp_path / "oracle_progress.npz"
+    half = dataclasses.replace(cfg, steps=2)
+    oracle_commands(arm_c, targets[1], inits[1], k, half, progress_path=path)
+    with np.load(path) as f:
+        assert f["history"].shape == (2, 1)
+        fingerprint = str(f["fingerprint"])
+    one, info_one = oracle_commands(arm_c, targets[1], inits[1], k, cfg, progress_path=path)
     np.testing.assert_allclose(one, both[1], rtol=1e-5, atol=1e-6)
     np.testing.assert_allclose(info_one["loss_history"], history[:, 1], rtol=1e-5)
+    assert len(info_one["step_wall_s"]) == 4
+    # The file of another optimisation is not used; a corrupt one is refused by name.
+    opt_state = optax.inject_hyperparams(optax.adam)(learning_rate=0.3).init(jnp.zeros((1, 8, 3)))
+    assert _load_progress(path, fingerprint + "x", opt_state) is None
+    path.write_bytes(b"not an npz")
+    with pytest.raises(ValueError, match="unreadable oracle progress"):
+        _load_progress(path, fingerprint, opt_state)
     # The tracking error of the returned commands in the C simulator is the optimised one.
     poses = held.run_dc(arm_c, one, k, "c")
     x_err = metrics.position_error_cm(poses, targets[1])

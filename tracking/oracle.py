@@ -12,7 +12,10 @@ so the evaluation (`eval.pipeline`) optimises the first `OracleConfig.horizon_s`
 from __future__ import annotations
 
 import dataclasses
+import hashlib
+import os
 import time
+from pathlib import Path
 
 import numpy as np
 from tqdm import tqdm
@@ -177,20 +180,76 @@ def _adam_step(arm_c, targets: np.ndarray, held: np.ndarray, k: int, cfg: Oracle
     return update, opt, commands_of
 
 
-def _best_iterates(update, opt, z0, steps: int, progress: bool):
+def _save_progress(path: Path, fingerprint: str, z, opt_state, best_z, best_loss, history, walls):
+    """Writes the optimisation's state after a step, atomically (a stopped run keeps the last
+    whole file)."""
+    import jax
+
+    leaves = jax.tree.leaves(opt_state)
+    arrays = {f"opt_{i}": np.asarray(leaf) for i, leaf in enumerate(leaves)}
+    tmp = path.with_name(path.name + ".tmp")
+    with open(tmp, "wb") as f:
+        np.savez(
+            f,
+            fingerprint=np.asarray(fingerprint),
+            z=np.asarray(z),
+            best_z=np.asarray(best_z),
+            best_loss=best_loss,
+            history=np.asarray(history),
+            step_wall_s=np.asarray(walls),
+            **arrays,
+        )
+    os.replace(tmp, path)
+
+
+def _load_progress(path: Path | None, fingerprint: str, opt_state):
+    """(z, opt_state, best_z, best_loss, history, step_wall_s) stored by an earlier run of the
+    same optimisation, or None: no file, or one of another optimisation (its fingerprint)."""
+    import jax
+    import jax.numpy as jnp
+
+    if path is None or not path.exists():
+        return None
+    try:
+        with np.load(path) as f:
+            if str(f["fingerprint"]) != fingerprint:
+                return None
+            treedef = jax.tree.structure(opt_state)
+            leaves = [jnp.asarray(f[f"opt_{i}"]) for i in range(treedef.num_leaves)]
+            return (
+                jnp.asarray(f["z"]),
+                jax.tree.unflatten(treedef, leaves),
+                jnp.asarray(f["best_z"]),
+                np.asarray(f["best_loss"]),
+                list(np.asarray(f["history"])),
+                list(np.asarray(f["step_wall_s"])),
+            )
+    except (OSError, ValueError, KeyError) as err:
+        raise ValueError(f"{path}: unreadable oracle progress ({err}); remove it") from err
+
+
+def _best_iterates(update, opt, z0, steps: int, progress: bool, progress_path=None, fingerprint=""):
     """Runs `steps` Adam steps from logits z0 [S, T * k, 3] and keeps each program's best.
+
+    With `progress_path`, the state is written there after every step and a run that finds a
+    file of the same optimisation (`fingerprint`) continues from it, with the same iterates.
 
     Returns:
       (best_z [S, T * k, 3], best_loss [S] (the lowest loss of any iterate; inf if none was
       finite), history: list of [S] losses of each iterate before its update, step_wall_s: list
-      of seconds per step, the first including compilation).
+      of seconds per step, the first of each run including compilation).
     """
     import jax.numpy as jnp
 
     z, opt_state = z0, opt.init(z0)
     best_z, best_loss, history, step_wall_s = z0, np.full(z0.shape[0], np.inf), [], []
+    stored = _load_progress(progress_path, fingerprint, opt_state)
+    if stored is not None:
+        z, opt_state, best_z, best_loss, history, step_wall_s = stored
     bar = tqdm(
-        range(steps),
+        range(len(history), steps),
+        initial=len(history),
+        total=steps,
         desc="oracle Adam steps (the 1st compiles)",
         unit="step",
         disable=not progress,
@@ -205,8 +264,23 @@ def _best_iterates(update, opt, z0, steps: int, progress: bool):
         best_z = jnp.where(jnp.asarray(better)[:, None, None], z, best_z)
         best_loss = np.where(better, loss, best_loss)
         z = new_z
+        if progress_path is not None:
+            _save_progress(
+                progress_path, fingerprint, z, opt_state, best_z, best_loss, history, step_wall_s
+            )
         bar.set_postfix(best_loss_max=f"{best_loss.max():.4g}", refresh=False)
     return best_z, best_loss, history, step_wall_s
+
+
+def _fingerprint(arm_c, targets, inits, held, k: int, cfg: OracleConfig) -> str:
+    """What the optimisation's iterates depend on: the arm, targets, start, k and settings
+    (not the number of steps: a longer run's first iterates are the shorter run's)."""
+    digest = hashlib.sha256()
+    for array in (targets, inits, held):
+        digest.update(np.ascontiguousarray(array).tobytes())
+    settings = dataclasses.asdict(cfg) | {"steps": None}
+    digest.update(repr((arm_c.model_hash, k, settings)).encode())
+    return digest.hexdigest()[:16]
 
 
 def oracle_commands(
@@ -217,6 +291,7 @@ def oracle_commands(
     cfg: OracleConfig,
     held=False,
     progress: bool = False,
+    progress_path: str | os.PathLike | None = None,
 ) -> tuple[np.ndarray, dict]:
     """D_c commands that track the targets, optimised through the MJX rollout.
 
@@ -241,6 +316,9 @@ def oracle_commands(
       held: bool, or [S] bools: which programs are held (each init program must then be
         constant over each source step's k periods).
       progress: show a progress bar over Adam steps (the first compiles: minutes).
+      progress_path: a file the optimisation's state is kept in after every step; a stopped
+        run (a device call's time limit) continues from it when called again with the same
+        arm, targets, start and settings. None: nothing kept.
 
     Returns:
       (commands [T * k, 3] or [S, T * k, 3] bar, info: "loss_history" [steps] or [steps, S]
@@ -257,7 +335,11 @@ def oracle_commands(
     z0 = jnp.asarray(np.log(frac / (1 - frac)), dtype=jnp.float32)
     update, opt, commands_of = _adam_step(arm_c, targets, held, k, cfg)
     t0 = time.perf_counter()
-    best_z, best_loss, history, step_wall_s = _best_iterates(update, opt, z0, cfg.steps, progress)
+    path = None if progress_path is None else Path(progress_path)
+    fingerprint = _fingerprint(arm_c, targets, inits, held, k, cfg)
+    best_z, best_loss, history, step_wall_s = _best_iterates(
+        update, opt, z0, cfg.steps, progress, path, fingerprint
+    )
     commands = np.asarray(commands_of(best_z), dtype=np.float64)
     history = np.asarray(history).reshape(len(history), z0.shape[0])
     info = {
