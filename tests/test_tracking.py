@@ -172,3 +172,10 @@ def test_stretch_start_and_stretch_k(small_xml):
     target = arm_s.rollout(p, backend="c")
     poses = held.run_dc(arm_c, held.stretch(p, 3), 3, "c")
     assert errors[3] == pytest.approx(metrics.position_error_cm(poses, target).mean())
+
+
+def test_saturated_share_counts_commands_at_either_limit():
+    from studies.mpc_saturation import saturated_share
+
+    commands = np.array([[0.2, 1.0, 3.5], [0.2 + 1e-3, 3.5 - 1e-7, 2.0]])
+    assert saturated_share(commands, 0.2, 3.5) == 3 / 6
