@@ -97,6 +97,11 @@ class DistillConfig:
     """Seed of the programs and of the batch order."""
     max_wall_s: float = 0.0
     """Stop training after this many seconds (0: no limit); the best iterate so far is kept."""
+    hold_factor: int = 0
+    """k, the control periods each command is held, for the teacher and the distilled
+    translators (0: the translators' own, which must agree). G_c gives one command per source
+    step whatever k is; a k at which the D_c arm keeps up with the targets keeps the teacher
+    off the valve limits (`studies.mpc_saturation`)."""
 
     def __post_init__(self):
         """Refuses settings that would fail late, after the teacher's commands are computed and
@@ -118,6 +123,7 @@ class DistillConfig:
                 "eval_every": 1,
                 "seed": 0,
                 "max_wall_s": 0,
+                "hold_factor": 0,
             },
             above={"head_weight": 0, "learning_rate": 0},
         )
@@ -354,6 +360,7 @@ def _new_history(arm_c, k: int, data: ImitationData) -> dict:
         "val": {},
         "teacher_val_x_err_cm": {"whole": teacher_whole, "window": float(head)},
         "complete": False,
+        "k": k,
     }
 
 
@@ -383,7 +390,8 @@ def distill(
     """Trains each translator's G_c to reproduce the teacher's commands.
 
     Args:
-      translators: trained translators (the same generator shape and k), one per seed.
+      translators: trained translators (the same generator shape; the same k unless
+        `config.hold_factor` sets one), one per seed.
       arm_s, arm_c: the D_s and D_c arms.
       config: settings.
       cache: file for the teacher's commands (read when its settings match, else written).
@@ -395,9 +403,9 @@ def distill(
       (best G_c parameters per translator, history: "train_loss" [epochs, S] (weighted mean
       squared normalised pressure error), "val" {epoch: {"score", "window", "whole"} [S] cm},
       "teacher_val_x_err_cm" (whole, window), "best_epoch" [S] (0: the original was best),
-      "best_val_x_err_cm" [S], "val_x_err_cm_before" [S], "wall_s").
+      "best_val_x_err_cm" [S], "val_x_err_cm_before" [S] (at this k), "k", "wall_s").
     """
-    k = common_k(translators)
+    k = config.hold_factor or common_k(translators)
     n_train = config.n_train + config.n_train_full  # >= batch_size (DistillConfig checks)
     t0 = time.perf_counter()
     data = imitation_data(config, translators[0], arm_s, arm_c, k, cache, log, progress)
@@ -463,6 +471,9 @@ def main(argv=None) -> None:
     config = config_from_args(p, a, DistillConfig)
     stage = start_stage(p, a, "ccgan.distill", dataclasses.asdict(config), argv)
     stage.run["method"] = "distill"
+    ks = sorted({t.k for t in stage.translators})
+    if config.hold_factor == 0 and len(ks) > 1:
+        p.error(f"the translators hold their commands for k = {ks} periods: give --hold-factor")
 
     def write(params, history) -> None:
         """The best translators so far and the history (rewritten at every validation)."""
@@ -475,7 +486,7 @@ def main(argv=None) -> None:
             }
             for s_i in range(len(stage.seeds))
         ]
-        stage.write(params, per_seed, history, "distill.json")
+        stage.write(params, per_seed, history, "distill.json", k=history["k"])
 
     params, history = distill(
         stage.translators,

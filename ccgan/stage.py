@@ -211,12 +211,16 @@ class Stage:
     out: Path
     run: dict
 
-    def write(self, params, per_seed_meta: list[dict], history: dict, json_name: str) -> None:
+    def write(
+        self, params, per_seed_meta: list[dict], history: dict, json_name: str, k: int | None = None
+    ) -> None:
         """Writes each seed's translator file (G_c replaced, the stage's record added to its
-        metadata) and the history, atomically."""
+        metadata; k, the hold factor, replaced when given) and the history, atomically."""
         for s_i, (seed, source) in enumerate(zip(self.seeds, self.sources, strict=True)):
             meta = self.run | {"seed": seed} | per_seed_meta[s_i]
             tree, file_meta = finetuned_checkpoint(source, params[s_i], meta)
+            if k is not None:
+                file_meta = file_meta | {"k": int(k)}
             checkpoint.save(self.out / f"translator_seed{seed}.ckpt", tree, file_meta)
         checkpoint.link_first_seed(self.out, f"translator_seed{self.seeds[0]}.ckpt")
         tmp = self.out / f"{json_name}.tmp"

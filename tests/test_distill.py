@@ -128,3 +128,22 @@ def test_distill_cli_writes_translators_with_their_history(tmp_path):
     assert tuned.k == shipped.k
     leaves = jax.tree.leaves(tuned.g_c_params), jax.tree.leaves(shipped.g_c_params)
     assert [x.shape for x in leaves[0]] == [x.shape for x in leaves[1]]
+
+
+def test_distill_cli_sets_one_hold_factor_for_translators_that_disagree(tmp_path):
+    """Seeds whose trainings chose different k: refused without --hold-factor; with it the
+    teacher plans at that k and every file written holds its commands k periods."""
+    source = translator_path()
+    tree, meta = checkpoint.load(source)
+    other = checkpoint.save(tmp_path / "other_k.ckpt", tree, meta | {"k": meta["k"] + 1})
+    out = tmp_path / "run"
+    args = ["--translators", str(source), str(other), "--out", str(out), "--n-train", "2"]
+    args += ["--n-val", "1", "--duration-s", "0.5", "--epochs", "1", "--batch-size", "2"]
+    args += ["--eval-every", "1"]
+    with pytest.raises(SystemExit):
+        distill.main(args)
+    assert not (out / "translator.ckpt").exists()
+    distill.main(args + ["--hold-factor", "3"])
+    assert [load_translator(out / f"translator_seed{s}.ckpt").k for s in (0, 1)] == [3, 3]
+    with np.load(out / "teacher.npz") as f:
+        assert '"k": 3' in str(f["key"])
