@@ -15,7 +15,8 @@
 # epoch and checkpoint (experiments.stages.STOP_GRACE_S), the install and the packing stay under
 # the device's 600 s per call.
 #
-# Sequence of `run` calls (nvidia-h100-x1 or nvidia-h200; timeout_s 600):
+# Sequence of `run` calls (nvidia-h100-x1 or nvidia-h200, or a kind of several GPUs, where each
+# stage gets a GPU of its own; timeout_s 600):
 #   1. carry [".whl"]:   bash experiments/device.sh
 #   2.. carry nothing, each within the machine's 30 s warm window: bash experiments/device.sh
 #      (the run folder is still in /tmp/paper), until the command says every stage is done.
@@ -38,7 +39,15 @@ CONFIG=${CONFIG:-experiments/paper.json} # experiments/quick.json rehearses the 
 nvidia-smi --query-gpu=timestamp,utilization.gpu,memory.used --format=csv,noheader -l 15 \
   >>"$TMP/gpu_use.csv" 2>/dev/null &
 sampler=$!
-$PY -m experiments.paper --out "$RUN_DIR" --config "$CONFIG" --jobs "${JOBS:-4}" \
+# Several GPUs: each stage gets one (--devices), and as many stages run as there are GPUs, at
+# least 4.
+n_gpus=$(nvidia-smi -L 2>/dev/null | grep -c '^GPU' || true)
+devices=()
+if ((n_gpus > 1)); then
+  devices=(--devices $(seq 0 $((n_gpus - 1))))
+  JOBS=${JOBS:-$((n_gpus > 4 ? n_gpus : 4))}
+fi
+$PY -m experiments.paper --out "$RUN_DIR" --config "$CONFIG" --jobs "${JOBS:-4}" "${devices[@]}" \
   --deadline-s "${DEADLINE_S:-500}" 2>&1 |
   tee -a "$TMP/paper_log.txt"
 rc=${PIPESTATUS[0]}

@@ -5,6 +5,7 @@
     python -m experiments.paper --out DIR --stage ccgan   # run or resume one stage
     python -m experiments.paper --out DIR --deadline-s 540   # stop cleanly; rerun to continue
     python -m experiments.paper --out DIR --jobs 4           # independent stages at once
+    python -m experiments.paper --out DIR --jobs 4 --devices 0 1 2 3   # one GPU each
 
 The stages and every setting are in a committed config (`experiments/paper.json`; the tiny
 `experiments/quick.json` runs the same chain on a CPU in minutes). The schedule is fixed there
@@ -52,6 +53,13 @@ def build_parser() -> argparse.ArgumentParser:
         default=1,
         help="run up to this many stages at once, each when its inputs are done (their outputs"
         " go to DIR/NAME.log); small trainings leave one GPU mostly idle, so 3-4 share it well",
+    )
+    parser.add_argument(
+        "--devices",
+        nargs="+",
+        default=[],
+        help="GPU ids: each stage runs on one of them (CUDA_VISIBLE_DEVICES), the least busy, so"
+        " stages on different GPUs run side by side; give --jobs at least as many",
     )
     parser.add_argument("--list", action="store_true", help="show the stages' state; run nothing")
     parser.add_argument(
@@ -101,7 +109,12 @@ def main(argv=None) -> int:
     selected = args.stage or list(chain.stages)
     try:
         run_stages(
-            chain, selected, jobs=args.jobs, redo=tuple(args.redo), deadline_s=args.deadline_s
+            chain,
+            selected,
+            jobs=args.jobs,
+            redo=tuple(args.redo),
+            deadline_s=args.deadline_s,
+            devices=tuple(args.devices),
         )
     except DeadlineReached as err:
         print(f"stopped: {err}. Rerun the same command to continue.", file=sys.stderr)

@@ -279,6 +279,7 @@ class Attempt:
       log_path: where the command's stdout and stderr go (appended); None: this process's own.
       env: the command's environment; None: this process's.
       jobs: how many stages the run let share the machine (recorded: wall times depend on it).
+      device: the accelerator the command was given, recorded (its env sets it).
     """
 
     def __init__(
@@ -290,11 +291,14 @@ class Attempt:
         log_path: Path | None = None,
         env: dict | None = None,
         jobs: int = 1,
+        device: str | None = None,
     ):
         self.chain, self.name, self.key, self.attempts = chain, name, key, attempts
         self.entry = {"started": datetime.datetime.now().isoformat(timespec="seconds")}
         self.entry["wall_s"] = None
         self.entry["jobs"] = jobs  # the most stages the run let share the machine
+        if device is not None:
+            self.entry["device"] = device  # the accelerator it was given (CUDA_VISIBLE_DEVICES)
         attempts.append(self.entry)
         self._write()
         self.start = time.perf_counter()
@@ -324,13 +328,22 @@ class Attempt:
 
     def stop(self) -> None:
         """SIGTERM, then SIGKILL after `STOP_GRACE_S`: a training command writes its checkpoint."""
-        self.process.terminate()
+        stop_all([self])
+
+
+def stop_all(attempts: list[Attempt]) -> None:
+    """Stops several commands at once: SIGTERM to all, then SIGKILL to those still running
+    `STOP_GRACE_S` later (one grace period for all, not one each)."""
+    for attempt in attempts:
+        attempt.process.terminate()
+    end = time.monotonic() + STOP_GRACE_S
+    for attempt in attempts:
         try:
-            self.process.wait(timeout=STOP_GRACE_S)
+            attempt.process.wait(timeout=max(0.0, end - time.monotonic()))
         except subprocess.TimeoutExpired:
-            self.process.kill()
-            self.process.wait()
-        self.close()
+            attempt.process.kill()
+            attempt.process.wait()
+        attempt.close()
 
 
 def _begin(chain: Chain, name: str, redo: bool, log) -> tuple[dict, list[dict]] | None:
@@ -452,10 +465,15 @@ def run_stages(
     log=print,
     poll_s: float = 1.0,
     status_every_s: float = 60.0,
+    devices: tuple[str, ...] = (),
 ) -> None:
     """Runs the named stages, up to `jobs` at once, each as soon as its inputs are done.
 
-    With one job the commands' output is shown here; with more, each command writes
+    With `devices` (GPU ids), each command sees one of them (`CUDA_VISIBLE_DEVICES`), the one
+    running the fewest stages: stages on different GPUs run truly side by side, while stages
+    sharing one GPU take turns on it. Without, every command sees every GPU.
+
+    With one job and no devices the commands' output is shown here; otherwise each command writes
     `NAME.log` beside its folder (kept in the folder as `stage.log` when it finishes) and a line
     every `status_every_s` says what runs. After a failure no new stage starts; those running
     finish. At the deadline every running command is stopped.
@@ -471,7 +489,7 @@ def run_stages(
         missing = [n for n in chain.stages[name].inputs if n not in names and not chain.manifest(n)]
         if missing:
             raise StageError(f"stage {name} reads {missing}, which have not finished: run them too")
-    if jobs == 1:
+    if jobs == 1 and not devices:
         start = time.monotonic()
         for i, name in enumerate(names):
             log(f"== stage {i + 1}/{len(names)}: {name}")
@@ -480,9 +498,9 @@ def run_stages(
                 raise DeadlineReached(f"the deadline came before stage {name}")
             run_stage(chain, name, redo=name in redo, deadline_s=left, log=log)
         return
-    _Scheduler(chain, names, jobs, redo, log, _child_env(jobs)).run(
-        deadline_s, poll_s, status_every_s
-    )
+    scheduler = _Scheduler(chain, names, jobs, redo, log, _child_env(jobs))
+    scheduler.devices = {str(d): 0 for d in devices}
+    scheduler.run(deadline_s, poll_s, status_every_s)
 
 
 class _Scheduler:
@@ -493,6 +511,7 @@ class _Scheduler:
         self.waiting = list(names)
         self.running: dict[str, tuple[Attempt, dict, list]] = {}
         self.failures: list[StageError] = []
+        self.devices: dict[str, int] = {}  # GPU id -> stages running on it
 
     def ready(self) -> list[str]:
         chain = self.chain
@@ -516,15 +535,29 @@ class _Scheduler:
 
     def _start(self, name: str, begun: tuple[dict, list[dict]]) -> None:
         log_path = self.chain.log_path(name)
-        attempt = Attempt(self.chain, name, *begun, log_path=log_path, env=self.env, jobs=self.jobs)
-        self.log(f"[{name}] started; its output goes to {log_path}")
+        env, device = self.env, None
+        if self.devices:
+            device = min(self.devices, key=self.devices.get)  # the least busy, first on a tie
+            self.devices[device] += 1
+            env = env | {"CUDA_VISIBLE_DEVICES": device}
+        attempt = Attempt(
+            self.chain, name, *begun, log_path=log_path, env=env, jobs=self.jobs, device=device
+        )
+        on = "" if device is None else f" on GPU {device}"
+        self.log(f"[{name}] started{on}; its output goes to {log_path}")
         self.running[name] = (attempt, *begun)
+
+    def _release(self, attempt: Attempt) -> None:
+        device = attempt.entry.get("device")
+        if device is not None:
+            self.devices[device] -= 1
 
     def reap(self) -> None:
         for name, (attempt, key, attempts) in list(self.running.items()):
             if attempt.process.poll() is None:
                 continue
             del self.running[name]
+            self._release(attempt)
             rc = attempt.close()
             if rc == 0:
                 _finish(self.chain, name, key, attempts, self.log)
@@ -542,8 +575,7 @@ class _Scheduler:
                 self.launch()
                 now = time.monotonic()
                 if deadline_s is not None and now - start >= deadline_s and self.running:
-                    for attempt, _, _ in self.running.values():
-                        attempt.stop()
+                    stop_all([attempt for attempt, _, _ in self.running.values()])
                     names = ", ".join(self.running)
                     self.running.clear()
                     raise DeadlineReached(f"stage(s) {names} stopped at the deadline")

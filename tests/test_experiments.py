@@ -7,10 +7,12 @@ import json
 import os
 import shlex
 import textwrap
+import time
 
 import pytest
 
 from experiments import paper, report
+from experiments import stages as stages_lib
 from experiments.stages import (
     Chain,
     DeadlineReached,
@@ -22,8 +24,10 @@ from experiments.stages import (
 
 FAKE_STAGE = textwrap.dedent(
     """
-    import pathlib, sys, time
+    import os, pathlib, signal, sys, time
     args = sys.argv[1:]
+    if "--ignore-term" in args:
+        signal.signal(signal.SIGTERM, signal.SIG_IGN)
     def opt(name):
         return args[args.index(name) + 1] if name in args else None
     out = pathlib.Path(opt("--out"))
@@ -36,6 +40,7 @@ FAKE_STAGE = textwrap.dedent(
     upstream = pathlib.Path(opt("--in"), "out.txt").read_text() if opt("--in") else ""
     (out / "out.txt").write_text(opt("--text") + upstream)
     (out / "times.txt").write_text(f"{time.time() - float(opt('--sleep') or 0)} {time.time()}")
+    (out / "device.txt").write_text(os.environ.get("CUDA_VISIBLE_DEVICES", "all"))
     print("done", opt("--text"))
     """
 )
@@ -74,7 +79,7 @@ def test_finished_stages_are_skipped_and_record_what_they_made(fake):
     run_all(chain)
     assert (chain.folder("b") / "out.txt").read_text() == "ba"
     manifest = chain.manifest("b")
-    assert manifest["files"].keys() == {"out.txt", "times.txt"}
+    assert manifest["files"].keys() == {"out.txt", "times.txt", "device.txt"}
     assert manifest["key"]["inputs"]["a"] == chain.outputs_digest("a")
     assert "--out run/b " not in manifest["command"] and manifest["command"].endswith("run/b")
     assert not list(chain.out.glob("*.partial")) and not list(chain.out.glob("*.attempts.json"))
@@ -189,6 +194,28 @@ def test_jobs_deadline_stops_every_running_stage(fake):
         assert chain.status(name) == "partial"
         attempts = json.loads(chain.attempts_path(name).read_text())["attempts"]
         assert attempts[0]["wall_s"] < 30
+
+
+def test_devices_give_each_running_stage_the_least_busy_gpu(fake):
+    chain = three_stage_chain(fake)
+    run_stages(
+        chain, list(chain.stages), jobs=2, devices=("0", "1"), log=lambda _: None, poll_s=0.1
+    )
+    device = {n: (chain.folder(n) / "device.txt").read_text() for n in "abc"}
+    assert {device["a"], device["c"]} == {"0", "1"}  # side by side, one GPU each
+    assert device["b"] in {"0", "1"}
+    assert all(chain.manifest(n)["attempts"][0]["device"] == device[n] for n in "abc")
+
+
+def test_jobs_deadline_gives_all_stopped_stages_one_grace_period(fake, monkeypatch):
+    """Commands that ignore SIGTERM are killed after one grace period, not one each."""
+    monkeypatch.setattr(stages_lib, "STOP_GRACE_S", 2.0)
+    args = "--sleep 30 --ignore-term"
+    chain = three_stage_chain(fake, a_args=f"--text a {args}", c_args=f"--text c {args}")
+    start = time.monotonic()
+    with pytest.raises(DeadlineReached):
+        run_stages(chain, list(chain.stages), jobs=2, deadline_s=1.0, log=lambda _: None)
+    assert time.monotonic() - start < 1.0 + 2 * 2.0 - 0.5
 
 
 def test_selected_stages_need_their_inputs_done_or_selected(fake):
