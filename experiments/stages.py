@@ -436,9 +436,7 @@ def run_stage(
             f"stage {name} stopped at the deadline; rerun to continue it"
         ) from None
     except BaseException:
-        attempt.process.kill()
-        attempt.process.wait()
-        attempt.close()
+        attempt.stop()  # Ctrl-C or SIGTERM to this run: as at the deadline
         raise
     rc = attempt.close()
     if rc != 0:
@@ -588,10 +586,10 @@ class _Scheduler:
                         )
                     )
         except BaseException:
-            for attempt, _, _ in self.running.values():
-                attempt.process.kill()
-                attempt.process.wait()
-                attempt.close()
+            # A refused stage, Ctrl-C or SIGTERM to this run: the running commands stop as at
+            # the deadline, so a training keeps its last epoch.
+            stop_all([attempt for attempt, _, _ in self.running.values()])
+            self.running.clear()
             raise
         if self.failures:
             raise self.failures[0]
