@@ -18,6 +18,7 @@ of each stage and the tables beside the paper's.
 from __future__ import annotations
 
 import argparse
+import json
 import signal
 import sys
 from pathlib import Path
@@ -73,12 +74,20 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def list_stages(chain: Chain) -> None:
+    """Each stage's state; a done one with its wall time, a partial one with its attempts."""
     for name in chain.stages:
         try:
             status = chain.status(name)
         except StageError as err:
             status = f"broken ({err})"
-        if status in ("todo", "partial"):
+        if status == "done":
+            manifest = chain.manifest(name)
+            status += f" ({manifest['wall_s']:.0f} s over {len(manifest['attempts'])} attempt(s))"
+        if status == "partial" and chain.attempts_path(name).exists():
+            attempts = json.loads(chain.attempts_path(name).read_text())["attempts"]
+            wall_s = sum(a["wall_s"] or 0.0 for a in attempts)
+            status += f" ({len(attempts)} attempt(s), {wall_s:.0f} s so far)"
+        if status.startswith(("todo", "partial")):
             waiting = [n for n in chain.stages[name].inputs if chain.manifest(n) is None]
             if waiting:
                 status += f" (waits for {', '.join(waiting)})"

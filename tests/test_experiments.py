@@ -133,6 +133,10 @@ def test_deadline_stops_the_command_and_the_cli_says_so(fake, capsys):
     attempts = json.loads(chain.attempts_path("a").read_text())["attempts"]
     assert len(attempts) == 1 and attempts[0]["wall_s"] < 30
     config = fake / "chain.json"
+    assert paper.main(["--out", str(chain.out), "--config", str(config), "--list"]) == 0
+    listed = capsys.readouterr().out.splitlines()
+    assert listed[0].startswith("a              partial (1 attempt(s),")
+    assert listed[2] == "b              todo (waits for a)"
     argv = ["--out", str(chain.out), "--config", str(config), "--deadline-s", "1"]
     assert paper.main(argv) == paper.EXIT_STOPPED
     assert "Rerun the same command" in capsys.readouterr().err
