@@ -7,6 +7,7 @@ simulation); the arm is the 3-segment test arm, loaded only for its model hash.
 
 import argparse
 import dataclasses
+import signal
 
 import jax
 import jax.numpy as jnp
@@ -449,6 +450,30 @@ def test_forward_models_trained_once_serve_other_runs_only_when_they_fit(
     assert copied == (forward_dir / "forward_c.ckpt").read_bytes()
     # The first seed's model is stored once: translator.ckpt names translator_seed0.ckpt.
     assert (run / "translator.ckpt").resolve() == (run / "translator_seed0.ckpt").resolve()
+
+
+def test_sigterm_stops_training_after_its_epoch_with_a_checkpoint(
+    tmp_path, files, small_arm, monkeypatch
+):
+    """SIGTERM (a time limit, the chain's deadline) as training starts: one epoch, a checkpoint,
+    no translator, exit status 143; the same command then finishes the run."""
+    model, _ = small_arm
+    data = ["--source", files["s"], "--constrained", files["c"], "--model", model, *TINY_TRAIN]
+    argv = [*data, "--epochs", "3", "--workdir", str(tmp_path / "run")]  # the last --epochs wins
+
+    def signal_at_once(signum, handler):
+        assert signum == signal.SIGTERM
+        handler(signum, None)  # as if the signal came the moment the handler was set
+
+    with monkeypatch.context() as patch:
+        patch.setattr(train_lib.signal, "signal", signal_at_once)
+        with pytest.raises(SystemExit) as stopped:
+            train_lib.main(argv)
+    assert stopped.value.code == 128 + signal.SIGTERM
+    _, meta = checkpoint.load(tmp_path / "run" / "state.ckpt")
+    assert meta["epoch"] == 1 and not (tmp_path / "run" / "translator.ckpt").exists()
+    train_lib.main(argv)
+    assert (tmp_path / "run" / "translator.ckpt").exists()
 
 
 def test_first_seed_link_replaces_a_copy_and_follows_the_seed(tmp_path):
