@@ -294,9 +294,11 @@ class Attempt:
         device: str | None = None,
     ):
         self.chain, self.name, self.key, self.attempts = chain, name, key, attempts
-        self.entry = {"started": datetime.datetime.now().isoformat(timespec="seconds")}
-        self.entry["wall_s"] = None
-        self.entry["jobs"] = jobs  # the most stages the run let share the machine
+        self.entry = {
+            "started": datetime.datetime.now().isoformat(timespec="seconds"),
+            "wall_s": None,
+            "jobs": jobs,  # the most stages the run let share the machine
+        }
         if device is not None:
             self.entry["device"] = device  # the accelerator it was given (CUDA_VISIBLE_DEVICES)
         attempts.append(self.entry)
@@ -496,20 +498,19 @@ def run_stages(
                 raise DeadlineReached(f"the deadline came before stage {name}")
             run_stage(chain, name, redo=name in redo, deadline_s=left, log=log)
         return
-    scheduler = _Scheduler(chain, names, jobs, redo, log, _child_env(jobs))
-    scheduler.devices = {str(d): 0 for d in devices}
+    scheduler = _Scheduler(chain, names, jobs, redo, log, _child_env(jobs), devices)
     scheduler.run(deadline_s, poll_s, status_every_s)
 
 
 class _Scheduler:
     """`run_stages` with several commands at once."""
 
-    def __init__(self, chain, names, jobs, redo, log, env):
+    def __init__(self, chain, names, jobs, redo, log, env, devices=()):
         self.chain, self.jobs, self.redo, self.log, self.env = chain, jobs, redo, log, env
         self.waiting = list(names)
         self.running: dict[str, tuple[Attempt, dict, list]] = {}
         self.failures: list[StageError] = []
-        self.devices: dict[str, int] = {}  # GPU id -> stages running on it
+        self.devices = {str(d): 0 for d in devices}  # GPU id -> stages running on it
 
     def ready(self) -> list[str]:
         chain = self.chain

@@ -21,6 +21,7 @@ import numpy as np
 from tqdm import tqdm
 
 from mjx_arm import constants
+from mjx_arm.atomic import write_atomically
 from tracking import held as held_lib
 from tracking import metrics, mpc
 from tracking.config import ConfigError, check_duration, check_fields, check_ints, require
@@ -187,19 +188,15 @@ def _save_progress(path: Path, fingerprint: str, z, opt_state, best_z, best_loss
 
     leaves = jax.tree.leaves(opt_state)
     arrays = {f"opt_{i}": np.asarray(leaf) for i, leaf in enumerate(leaves)}
-    tmp = path.with_name(path.name + ".tmp")
-    with open(tmp, "wb") as f:
-        np.savez(
-            f,
-            fingerprint=np.asarray(fingerprint),
-            z=np.asarray(z),
-            best_z=np.asarray(best_z),
-            best_loss=best_loss,
-            history=np.asarray(history),
-            step_wall_s=np.asarray(walls),
-            **arrays,
-        )
-    os.replace(tmp, path)
+    arrays |= {
+        "fingerprint": np.asarray(fingerprint),
+        "z": np.asarray(z),
+        "best_z": np.asarray(best_z),
+        "best_loss": best_loss,
+        "history": np.asarray(history),
+        "step_wall_s": np.asarray(walls),
+    }
+    write_atomically(path, lambda f: np.savez(f, **arrays))
 
 
 def _load_progress(path: Path | None, fingerprint: str, opt_state):
