@@ -179,3 +179,10 @@ def test_saturated_share_counts_commands_at_either_limit():
 
     commands = np.array([[0.2, 1.0, 3.5], [0.2 + 1e-3, 3.5 - 1e-7, 2.0]])
     assert saturated_share(commands, 0.2, 3.5) == 3 / 6
+
+
+def test_stretch_k_study_tries_what_eval_tries():
+    from eval.pipeline import EvalConfig
+    from studies.stretch_k import CANDIDATES
+
+    assert CANDIDATES == EvalConfig().hold_factors
