@@ -471,9 +471,11 @@ def main(argv=None) -> None:
     config = config_from_args(p, a, DistillConfig)
     stage = start_stage(p, a, "ccgan.distill", dataclasses.asdict(config), argv)
     stage.run["method"] = "distill"
-    ks = sorted({t.k for t in stage.translators})
-    if config.hold_factor == 0 and len(ks) > 1:
-        p.error(f"the translators hold their commands for k = {ks} periods: give --hold-factor")
+    if config.hold_factor == 0:
+        try:
+            common_k(stage.translators)
+        except ValueError as err:
+            p.error(f"{err}: give --hold-factor")
 
     def write(params, history) -> None:
         """The best translators so far and the history (rewritten at every validation)."""
