@@ -53,6 +53,7 @@ from ccgan.stage import (
     validated_loop,
 )
 from ccgan.translator import Translator
+from mjx_arm.atomic import write_atomically
 from mjx_arm.programs import shape_like_programs
 from tracking import mpc
 from tracking.config import ConfigError, check_fields
@@ -177,7 +178,6 @@ def teacher_data(
         except (OSError, ValueError, KeyError) as err:
             log(f"{cache} is unreadable ({err}); recomputing")
     mpc_cfg = mpc.MpcConfig(horizon_steps=config.horizon_steps, iterations=config.iterations)
-    grown = False
     for split, n, full_scale in splits:
         have = len(store.get(f"p_{split}", ()))
         if n == 0:
@@ -195,14 +195,11 @@ def teacher_data(
         for name, value in new.items():
             old = store.get(f"{name}_{split}", np.zeros((0,) + value.shape[1:], np.float32))
             store[f"{name}_{split}"] = np.concatenate([old, value.astype(np.float32)])
-        grown = True
         wall_s = time.perf_counter() - t0
         log(f"teacher: {n - have} new {split} programs of {config.duration_s} s ({wall_s:.0f} s)")
-    if grown and cache is not None:
-        cache.parent.mkdir(parents=True, exist_ok=True)
-        tmp = cache.with_name(cache.name + ".tmp.npz")
-        np.savez_compressed(tmp, key=key, **store)
-        tmp.replace(cache)
+        if cache is not None:  # kept after each split: a run stopped later plans only the rest
+            cache.parent.mkdir(parents=True, exist_ok=True)
+            write_atomically(cache, lambda f: np.savez_compressed(f, key=key, **store))
     data = {}
     for part in ("p", "x", "c"):
         for joined in ("train", "val"):

@@ -147,3 +147,32 @@ def test_distill_cli_sets_one_hold_factor_for_translators_that_disagree(tmp_path
     assert [load_translator(out / f"translator_seed{s}.ckpt").k for s in (0, 1)] == [3, 3]
     with np.load(out / "teacher.npz") as f:
         assert '"k": 3' in str(f["key"])
+
+
+def test_teacher_cache_keeps_each_split_planned_before_a_stop(arms, tmp_path, monkeypatch):
+    """A run stopped while planning the held-out split (a deadline's SIGTERM) keeps the training
+    split's commands, and the rerun plans only the held-out split."""
+    arm_s, arm_c = arms
+    k = load_translator().k
+    config = dataclasses.replace(TINY, n_train=2, n_val=1, duration_s=0.5)
+    cache = tmp_path / "teacher.npz"
+    track = distill.mpc.track
+    calls = []
+
+    def stopped_on_second_split(*args, **kwargs):
+        calls.append(1)
+        if len(calls) == 2:
+            raise KeyboardInterrupt("stopped")
+        return track(*args, **kwargs)
+
+    monkeypatch.setattr(distill.mpc, "track", stopped_on_second_split)
+    with pytest.raises(KeyboardInterrupt):
+        distill.teacher_data(config, arm_s, arm_c, k, cache, log=lambda _: None)
+    with np.load(cache) as kept:
+        assert kept["p_train"].shape[0] == 2 and "p_val" not in kept.files
+    assert not [p for p in tmp_path.iterdir() if p.name != "teacher.npz"]  # no temporaries left
+    monkeypatch.setattr(distill.mpc, "track", track)
+    logs = []
+    data = distill.teacher_data(config, arm_s, arm_c, k, cache, log=logs.append)
+    assert "read from" in logs[0] and logs[1].startswith("teacher: 1 new val programs")
+    assert data["p_train"].shape[0] == 2 and data["p_val"].shape[0] == 1
