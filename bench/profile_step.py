@@ -8,7 +8,7 @@ generators_backward); busy time is the sum of kernel durations, and the rest of 
 is the device waiting between kernels.
 
     python -m bench.profile_step --data data/babble \
-        --forward-c results/translators/ccgan/forward_c.ckpt \
+        --forward-c results/solid/translators/ccgan/forward_c.ckpt \
         --feedback-impls lean lean_reduce --out bench/results/h200 --tag _dedup
 
 Writes profile_step{tag}.md and .json to --out.

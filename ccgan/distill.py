@@ -23,11 +23,12 @@ The files are translator checkpoints like `ccgan.finetune`'s (metadata "finetune
 stage, with "method": "distill"; earlier stages stay in "finetune_earlier"), rewritten at every
 validation ("complete": false until the run ends), so a killed run keeps its best iterates.
 
-    python -m ccgan.distill --translators results/ccgan_sim5/translator_seed{0,1,2}.ckpt \\
-        --seeds 0 1 2 --out results/ccgan_sim6
+    python -m ccgan.distill \\
+        --translators results/paper/run/ccgan_large/translator_seed{0,1,2}.ckpt \\
+        --seeds 0 1 2 --hold-factor 15 --out runs/ccgan_distilled
 
-As `ccgan.finetune`, the CLI simulates the arm of `--model` (default the solid-disc arm,
-`mjx_arm.constants.SOLID_MODEL_PATH`, the one the committed translators were trained on).
+As `ccgan.finetune`, the CLI simulates the arm of `--model` (default the I-Support arm,
+`mjx_arm.constants.DEFAULT_MODEL_PATH`, the one the committed translators were trained on).
 """
 
 from __future__ import annotations

@@ -21,8 +21,11 @@ from ccgan.data import (
 )
 from ccgan.models import ForwardModel, Generator, forward_open_loop
 
-#: The committed translators, one folder per method (results/README.md lists them).
-TRANSLATORS_DIR = Path(__file__).resolve().parent.parent / "results" / "translators"
+#: The committed translators of the I-Support arm (models/softarm.xml): the run folder of
+#: `python -m experiments.paper`, one folder per stage (ccgan, wcgan, ccgan_sim, aged, aged_sim).
+TRANSLATORS_DIR = Path(__file__).resolve().parent.parent / "results" / "paper" / "run"
+#: The earlier solid-disc arm's translators (models/softarm_solid.xml), kept for comparison.
+SOLID_TRANSLATORS_DIR = Path(__file__).resolve().parent.parent / "results" / "solid" / "translators"
 #: Where `load_translator()` looks when given no path (override with $CCGAN_TRANSLATOR).
 DEFAULT_PATH = TRANSLATORS_DIR / "ccgan" / "translator.ckpt"
 

@@ -54,9 +54,12 @@ RESULTS_DIR = "results"
 #: Parent of the run folders that runs with other settings write when no output folder is given:
 #: RUNS_DIR/quick-<time> for --quick, RUNS_DIR/custom-<time> otherwise, never results/.
 RUNS_DIR = "runs"
+#: What the report says of the arm at constants.DEFAULT_MODEL_PATH.
+ARM_NOTE = "the I-Support arm, on which the committed translators (results/paper/run/) were trained"
 #: What the report says of the arm at constants.SOLID_MODEL_PATH.
 SOLID_ARM_NOTE = (
-    "the old solid-disc arm, on which the committed translators (results/translators/) were trained"
+    "the earlier solid-disc arm, whose translators are in results/solid/translators/ (give them"
+    " with --ccgan-path, --wcgan-path, --ccgan-sim-path)"
 )
 
 
@@ -110,9 +113,9 @@ class EvalConfig:
     """A smoke run (`quick`): marked on every plot and video and in shapes.md."""
     xml: str | None = None
     """MJCF text of the arm (None: the file model_path); tests pass a 3-segment arm."""
-    model_path: str = str(constants.SOLID_MODEL_PATH)
-    """MJCF file of the arm when xml is None. Default: the old solid-disc arm
-    (`constants.SOLID_MODEL_PATH`), the one the committed translators were trained on."""
+    model_path: str = str(constants.DEFAULT_MODEL_PATH)
+    """MJCF file of the arm when xml is None. Default: the I-Support arm
+    (`constants.DEFAULT_MODEL_PATH`), the one the committed translators were trained on."""
     target_domain: str = "constrained"
     """The domain translated into (D_c): "constrained", or "aged" for the second pair."""
     ccgan_path: str | None = None
@@ -251,9 +254,12 @@ def model_description(cfg: EvalConfig) -> dict:
         name = str(path.relative_to(constants.ROOT))
     except ValueError:
         name = str(path)
-    solid = path == constants.SOLID_MODEL_PATH.resolve()
-    other = "not the arm the committed translators were trained on (models/softarm_solid.xml)"
-    return {"file": name, "note": SOLID_ARM_NOTE if solid else other}
+    notes = {
+        constants.DEFAULT_MODEL_PATH.resolve(): ARM_NOTE,
+        constants.SOLID_MODEL_PATH.resolve(): SOLID_ARM_NOTE,
+    }
+    other = "not the arm the committed translators were trained on (models/softarm.xml)"
+    return {"file": name, "note": notes.get(path, other)}
 
 
 def machine_description() -> str:
@@ -269,7 +275,7 @@ def machine_description() -> str:
 
 def load_arms(cfg: EvalConfig):
     """(D_s arm, D_c arm in cfg.target_domain) from cfg.xml, else the file cfg.model_path (by
-    default the solid-disc arm the committed translators were trained on)."""
+    default the I-Support arm the committed translators were trained on)."""
     if cfg.xml is not None:
         return (
             mjx_arm.load(xml=cfg.xml, domain="source"),
@@ -349,7 +355,7 @@ def _load(cfg: EvalConfig, run: RunLog) -> tuple:
             )
     run.timings["translators_s"] = time.perf_counter() - t0
     model = model_description(cfg)
-    if translators and model["note"] != SOLID_ARM_NOTE and cfg.xml is None:
+    if translators and model["note"] != ARM_NOTE and cfg.xml is None:
         run.note(f"the arm {model['file']} is {model['note']}.")
     t0 = time.perf_counter()
     arm_s, arm_c = load_arms(cfg)

@@ -187,8 +187,8 @@ def _add_arm_options(p: argparse.ArgumentParser) -> None:
         "--model",
         metavar="MJCF",
         default=EvalConfig.model_path,
-        help="MJCF file of the arm; by default the old solid-disc arm, on which the committed"
-        " translators were trained",
+        help="MJCF file of the arm; by default the I-Support arm, on which the committed"
+        " translators were trained (models/softarm_solid.xml: the earlier solid-disc arm)",
     )
     p.add_argument(
         "--target-domain",
@@ -201,21 +201,21 @@ def _add_arm_options(p: argparse.ArgumentParser) -> None:
         metavar="CKPT",
         default=None,
         help="CCGAN-GP translator checkpoint (default:"
-        " $CCGAN_TRANSLATOR, else results/translators/ccgan/translator.ckpt, skipped if absent)",
+        " $CCGAN_TRANSLATOR, else results/paper/run/ccgan/translator.ckpt, skipped if absent)",
     )
     p.add_argument(
         "--wcgan-path",
         metavar="CKPT",
         default=None,
         help="WCGAN-GP translator checkpoint (default:"
-        " results/translators/wcgan/translator.ckpt, skipped if absent)",
+        " results/paper/run/wcgan/translator.ckpt, skipped if absent)",
     )
     p.add_argument(
         "--ccgan-sim-path",
         metavar="CKPT",
         default=None,
         help="fine-tuned CCGAN-GP checkpoint"
-        " (default: results/translators/ccgan_sim/translator.ckpt, skipped if absent)",
+        " (default: results/paper/run/ccgan_sim/translator.ckpt, skipped if absent)",
     )
 
 

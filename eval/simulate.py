@@ -148,8 +148,8 @@ def start_oracle(plan: Plan, run: RunLog) -> _InThread | None:
 
     On an accelerator it runs in a worker thread (JAX releases the GIL) while the translators and
     the MuJoCo C rollouts keep the CPU cores busy. On a CPU the two would fight for the same cores
-    (2-core EPYC, the full table: 1048 s overlapped, in results/tables/full; 915 s one after the
-    other at commit 7e006b8), so there it runs at once, before them.
+    (2-core EPYC, the full table: 1048 s overlapped, in results/solid/tables/full; 915 s one after
+    the other at commit 7e006b8), so there it runs at once, before them.
     """
     import jax
 

@@ -5,8 +5,8 @@ first `window` seconds from rest) and after it. For each folder, each trained se
 (translator_seed{s}.ckpt) runs every shape in the MuJoCo C simulator of D_c; X_err (cm) is
 averaged over seeds.
 
-    python -m studies.finetune_window results/translators/ccgan results/translators/ccgan_sim \\
-        --out runs/finetune_window
+    python -m studies.finetune_window results/solid/translators/ccgan \\
+        results/solid/translators/ccgan_sim --out runs/finetune_window
 
 (The committed table also read the fine-tune stage folders of commit a2573cb.)
 """

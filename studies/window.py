@@ -35,7 +35,7 @@ def main(argv=None) -> dict:
     parser = cli_parser("studies.window", __doc__)
     parser.add_argument("--lengths", type=int, nargs="+", default=[5, 10, 20])
     parser.add_argument("--epochs", type=int, default=10)
-    parser.add_argument("--forward-workdir", default="results/translators/ccgan")
+    parser.add_argument("--forward-workdir", default="results/solid/translators/ccgan")
     parser.add_argument(
         "--out",
         default="runs/studies",

@@ -22,7 +22,7 @@ from ccgan import data as data_lib
 from ccgan import forward as forward_lib
 from ccgan import train as train_lib
 from ccgan.models import Generator
-from ccgan.translator import Translator, translator_path
+from ccgan.translator import SOLID_TRANSLATORS_DIR, Translator, translator_path
 from mjx_arm import constants
 from mjx_arm.dataset import Dataset, DatasetError, ModelHashMismatchError, save_dataset
 from mjx_arm.programs import random_held_programs
@@ -193,7 +193,7 @@ def test_run_stored_with_stretch_choices_resumes_under_hold_factors(tmp_path):
 
 
 def test_committed_translator_config_reads_with_the_renamed_field():
-    path = constants.ROOT / "results" / "translators" / "ccgan" / "translator_seed0.ckpt"
+    path = SOLID_TRANSLATORS_DIR / "ccgan" / "translator_seed0.ckpt"
     stored = checkpoint.read(path)[0]["config"]
     assert "stretch_choices" in stored
     config = config_lib.TrainConfig.from_dict(stored)
@@ -246,7 +246,8 @@ def test_tuned_hyperparameters_still_trace():
 
 @pytest.fixture(scope="module")
 def shipped():
-    return str(translator_path())
+    """The solid-disc arm's CCGAN-GP: its files record no arm, so it runs on the small arms."""
+    return str(SOLID_TRANSLATORS_DIR / "ccgan" / "translator.ckpt")
 
 
 @pytest.mark.parametrize(
@@ -292,12 +293,12 @@ def test_stage_clis_refuse_bad_paths(tmp_path, small_arm, shipped, main, capsys)
 
 
 def test_stages_simulate_the_arm_named_by_model(tmp_path, small_arm, shipped, capsys):
-    """Default: the solid-disc arm the committed translators were trained on; a translator
+    """Default: the I-Support arm the committed translators were trained on; a translator
     recorded on another arm is refused."""
     for module in (finetune, distill):
         p = module.build_parser()
         assert p.parse_args(["--translators", "t", "--out", "o"]).model == str(
-            constants.SOLID_MODEL_PATH
+            constants.DEFAULT_MODEL_PATH
         )
     model, model_hash = small_arm
     p = finetune.build_parser()

@@ -119,10 +119,10 @@ def test_distill_cli_writes_translators_with_their_history(tmp_path):
     _, meta = checkpoint.load(out / "translator.ckpt")
     assert meta["finetune"]["method"] == "distill" and meta["finetune"]["seed"] == 0
     assert meta["finetune"]["complete"]
-    # By default the stage simulates the solid-disc arm the shipped translators were trained on.
-    solid = mjx_arm.load(constants.SOLID_MODEL_PATH)
-    assert meta["finetune"]["model"] == str(constants.SOLID_MODEL_PATH)
-    assert meta["finetune"]["model_hash"] == solid.model_hash
+    # By default the stage simulates the I-Support arm the shipped translators were trained on.
+    arm = mjx_arm.load(constants.DEFAULT_MODEL_PATH)
+    assert meta["finetune"]["model"] == str(constants.DEFAULT_MODEL_PATH)
+    assert meta["finetune"]["model_hash"] == arm.model_hash
     assert (out / "teacher.npz").exists() and (out / "distill.json").exists()
     shipped = load_translator(source)
     assert tuned.k == shipped.k

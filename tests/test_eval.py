@@ -9,15 +9,16 @@ import numpy as np
 import pytest
 
 import mjx_arm  # (before jax)
-from ccgan.translator import DEFAULT_PATH
+from ccgan.translator import SOLID_TRANSLATORS_DIR
 from eval import methods, pipeline, render, report, simulate
 from mjx_arm import programs
 from tracking import held, metrics, mpc
 from tracking.metrics import tracking_loss
 from tracking.oracle import OracleConfig
 
-#: The committed CCGAN-GP translator (a link to its first seed's file).
-SHIPPED_TRANSLATOR = DEFAULT_PATH
+#: The solid-disc arm's committed CCGAN-GP translator (a link to its first seed's file). Its
+#: files record no arm, so it runs on the tests' 3-segment arms; the I-Support arm's record theirs.
+SHIPPED_TRANSLATOR = SOLID_TRANSLATORS_DIR / "ccgan" / "translator.ckpt"
 
 
 @pytest.fixture(scope="module")
@@ -62,6 +63,7 @@ def test_tiny_end_to_end(small_xml, tmp_path, capsys):
         shapes=("circle",),
         methods=("none", "stretch", "ccgan", "wcgan"),
         seeds=(0, 1),
+        ccgan_path=str(shipped),
         wcgan_path=str(tmp_path / "wcgan" / "translator.ckpt"),
         duration_s=2.0,
         hold_factors=(1, 2),

@@ -24,7 +24,8 @@ from tracking.config import ConfigError
 from tracking.oracle import OracleConfig
 
 ROOT = Path(__file__).resolve().parent.parent
-SHIPPED = ROOT / "results" / "translators" / "ccgan" / "translator.ckpt"
+#: The solid-disc arm's CCGAN-GP: its files record no arm, so it runs on the tests' small arms.
+SHIPPED = ROOT / "results" / "solid" / "translators" / "ccgan" / "translator.ckpt"
 
 
 def _file_hash(path) -> str:
@@ -61,7 +62,7 @@ def test_quick_run_defaults_to_a_new_run_folder_never_results(in_tmp):
 
 
 def test_quick_run_is_marked_and_states_its_arm_and_lengths(in_tmp, capsys):
-    """A tiny quick run on the default arm: a run folder, marked plots and report, the solid-disc
+    """A tiny quick run on the default arm: a run folder, marked plots and report, the I-Support
     arm named, every length from the config, progress bars on stderr."""
     cfg = pipeline.quick(
         pipeline.EvalConfig(
@@ -77,12 +78,12 @@ def test_quick_run_is_marked_and_states_its_arm_and_lengths(in_tmp, capsys):
     (out,) = Path(pipeline.RUNS_DIR).iterdir()
     assert out.name.startswith("quick-") and not Path("results").exists()
     assert data["config"]["out_dir"] == str(out)
-    # The default arm is the solid-disc one the committed translators were trained on.
-    assert data["model_hash"] == _file_hash(constants.SOLID_MODEL_PATH)
-    assert data["model"]["file"] == "models/softarm_solid.xml"
+    # The default arm is the I-Support one the committed translators were trained on.
+    assert data["model_hash"] == _file_hash(constants.DEFAULT_MODEL_PATH)
+    assert data["model"]["file"] == "models/softarm.xml"
     md = (out / "shapes.md").read_text()
     assert "QUICK RUN: 1 s programs, seeds [0]" in md
-    assert "`models/softarm_solid.xml`, the old solid-disc arm" in md
+    assert "`models/softarm.xml`, the I-Support arm" in md
     assert "0.5 s validation program" in md and "20 s validation" not in md
     assert json.loads((out / "shapes.json").read_text())["config"]["quick"] is True
     figures = [out / f for f in data["figures"]]
@@ -93,9 +94,11 @@ def test_quick_run_is_marked_and_states_its_arm_and_lengths(in_tmp, capsys):
     assert "stretch k on the validation program" in err and "D_c rollouts" in err
 
 
-def test_committed_report_regenerates_and_its_lengths_come_from_the_config():
-    results = json.loads((ROOT / "results" / "shapes.json").read_text())
-    assert report.markdown_report(results) == (ROOT / "results" / "shapes.md").read_text()
+@pytest.mark.parametrize("folder", ["results", "results/solid"])
+def test_committed_report_regenerates_and_its_lengths_come_from_the_config(folder):
+    """The main job's report, and the solid-disc arm's kept beside it."""
+    results = json.loads((ROOT / folder / "shapes.json").read_text())
+    assert report.markdown_report(results) == (ROOT / folder / "shapes.md").read_text()
     results["config"]["validation_duration_s"] = 10.0
     md = report.markdown_report(results)
     assert "on a 10 s validation program" in md and "20 s validation" not in md
@@ -313,11 +316,16 @@ def test_translators_trained_on_another_arm_are_refused(small_xml, tmp_path, mon
     assert "ccgan" in data["methods_run"] and (tmp_path / "out" / "shapes.md").exists()
 
 
-def test_default_arm_is_the_solid_disc_one_and_model_path_is_used(small_xml, tmp_path):
-    assert pipeline.EvalConfig().model_path == str(constants.SOLID_MODEL_PATH)
+def test_default_arm_is_the_isupport_one_and_model_path_is_used(small_xml, tmp_path):
+    assert pipeline.EvalConfig().model_path == str(constants.DEFAULT_MODEL_PATH)
     described = pipeline.model_description(pipeline.EvalConfig())
-    assert described["file"] == "models/softarm_solid.xml"
-    assert "old solid-disc arm" in described["note"]
+    assert described["file"] == "models/softarm.xml"
+    assert "I-Support arm" in described["note"]
+    solid = pipeline.model_description(
+        pipeline.EvalConfig(model_path=str(constants.SOLID_MODEL_PATH))
+    )
+    assert solid["file"] == "models/softarm_solid.xml"
+    assert "results/solid/translators/" in solid["note"]
     other = tmp_path / "small.xml"
     other.write_text(small_xml)
     cfg = pipeline.EvalConfig(model_path=str(other))

@@ -8,7 +8,10 @@ import pytest
 
 import mjx_arm
 from ccgan import checkpoint, finetune, load_translator
-from ccgan.translator import translator_path
+from ccgan.translator import SOLID_TRANSLATORS_DIR
+
+#: The solid-disc arm's CCGAN-GP: its files record no arm, so it runs on the 3-segment test arm.
+SOLID_CCGAN = SOLID_TRANSLATORS_DIR / "ccgan" / "translator.ckpt"
 
 
 @pytest.fixture(scope="module")
@@ -19,7 +22,7 @@ def arms():
 
 def test_finetune_lowers_the_window_error_and_writes_a_translator(arms, tmp_path):
     arm_s, arm_c = arms
-    shipped = load_translator()
+    shipped = load_translator(SOLID_CCGAN)
     config = finetune.FinetuneConfig(
         steps=4,
         batch_size=4,
@@ -79,7 +82,7 @@ def test_finetune_lowers_the_window_error_and_writes_a_translator(arms, tmp_path
     np.testing.assert_allclose(np.mean(errs), history["best_val_x_err_cm"][0], rtol=1e-4)
 
     # Written as a translator file: G_c replaced, F_c, k and bounds kept, settings recorded.
-    src = translator_path()
+    src = SOLID_CCGAN
     path = finetune.save_finetuned(tmp_path / "t.ckpt", src, params[0], {"config": "x"})
     loaded = load_translator(path)
     assert loaded.k == shipped.k and loaded.f_c_params is not None
