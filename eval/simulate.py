@@ -33,6 +33,10 @@ from tracking.held import every_kth, rollout_grouped
 
 #: The oracle's state in the output folder, kept after every Adam step.
 ORACLE_PROGRESS = "oracle_progress.npz"
+#: The receding-horizon tracker's commands, kept in the output folder (`tracking.mpc.track`'s
+#: result_path): the oracle's start over its window, and the mpc method's over whole shapes.
+ORACLE_START = "oracle_start.npz"
+MPC_RESULT = "mpc_commands.npz"
 
 
 def add_noise(pressures_bar: np.ndarray, std: float, seed: int) -> np.ndarray:
@@ -160,7 +164,13 @@ def start_oracle(plan: Plan, run: RunLog) -> _InThread | None:
     oracle_sources = np.stack([plan.sources[s][: plan.horizon] for s in shapes])
     t0 = time.perf_counter()
     oracle_init = oracle_lib.start_commands(
-        plan.arm_c, oracle_targets, oracle_sources, plan.k_stretch, cfg.oracle, progress=True
+        plan.arm_c,
+        oracle_targets,
+        oracle_sources,
+        plan.k_stretch,
+        cfg.oracle,
+        progress=True,
+        result_path=_kept(cfg, ORACLE_START),
     )
     if cfg.oracle.init == "mpc":
         run.timings["oracle_init_s"] = time.perf_counter() - t0
@@ -173,7 +183,7 @@ def start_oracle(plan: Plan, run: RunLog) -> _InThread | None:
         cfg.oracle,
         cfg.oracle.held,
         True,
-        None if cfg.out_dir is None else Path(cfg.out_dir) / ORACLE_PROGRESS,
+        _kept(cfg, ORACLE_PROGRESS),
         background=jax.default_backend() != "cpu",
     )
 
@@ -185,16 +195,24 @@ def run_mpc(plan: Plan, run: RunLog) -> dict[str, np.ndarray]:
         return {}
     shapes = plan.cfg.shapes
     t0 = time.perf_counter()
-    every, _ = mpc.track(
+    every, info = mpc.track(
         plan.arm_c,
         np.stack([plan.targets[s] for s in shapes]),
         plan.k_stretch,
         np.stack([plan.sources[s] for s in shapes]),
         progress=True,
+        result_path=_kept(plan.cfg, MPC_RESULT),
     )
     run.timings["mpc_s"] = time.perf_counter() - t0
-    run.log(f"mpc: {len(shapes)} shapes tracked in the D_c simulator, {run.timings['mpc_s']:.1f} s")
+    how = f"read from {MPC_RESULT}" if info["reused"] else "tracked in the D_c simulator"
+    run.log(f"mpc: {len(shapes)} shapes {how}, {run.timings['mpc_s']:.1f} s")
     return dict(zip(shapes, every, strict=True))
+
+
+def _kept(cfg, name: str) -> Path | None:
+    """Where a stage of the run keeps its result in the output folder (None: no folder), so a
+    run stopped part-way (a deadline) and run again into the same folder continues."""
+    return None if cfg.out_dir is None else Path(cfg.out_dir) / name
 
 
 def _rollout_specs(plan: Plan) -> list[tuple]:

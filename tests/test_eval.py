@@ -189,6 +189,13 @@ def test_mpc_method_and_the_oracle_starting_from_it(small_xml, tmp_path, capsys)
     assert "| shape | stretch | mpc | oracle |" in (tmp_path / "shapes.md").read_text()
     err = capsys.readouterr().err
     assert "oracle Adam steps" in err and "mpc" in err
+    # The run keeps the tracker's commands in its folder; the same run again reads them back.
+    kept = {simulate.MPC_RESULT, simulate.ORACLE_START, simulate.ORACLE_PROGRESS}
+    assert kept <= {p.name for p in tmp_path.iterdir()}
+    logs = []
+    again = pipeline.evaluate(cfg, command="test", log=logs.append)
+    assert any(f"read from {simulate.MPC_RESULT}" in str(line) for line in logs)
+    assert again["table"]["kite"]["mpc"] == data["table"]["kite"]["mpc"]
     with pytest.raises(ValueError, match="oracle.init"):
         OracleConfig(init="zeros")
 

@@ -10,8 +10,8 @@ from tracking import held, metrics, mpc
 
 @pytest.fixture(scope="module")
 def arms():
-    """(D_s, D_c) 3-segment arms of the solid-disc section, the arm eval.shapes scores by
-    default (`EvalConfig.model_path`). On the softer I-Support section the D_c arm cannot keep
+    """(D_s, D_c) 3-segment arms of the solid-disc section. On the softer I-Support section the
+    D_c arm cannot keep
     up with D_s at k = 10: 40-50% of the tracker's commands sit at a valve limit and its error
     is 0.52-0.56x the stretch program's (1 and 3 s of circle and kite), so the margins below
     are the solid arm's (measured: 0.41x over 1 s, 0.24x over 3 s)."""
@@ -56,3 +56,29 @@ def test_mpc_rejects_bad_input(arms):
         mpc.track(arm_c, np.zeros((5, 6)), 2, np.zeros((4, 3)))
     with pytest.raises(ValueError, match="finite"):
         mpc.track(arm_c, np.full((5, 6), np.nan), 2, np.zeros((5, 3)))
+
+
+def test_mpc_keeps_its_result_and_reuses_it_only_for_the_same_tracking(arms, tmp_path, monkeypatch):
+    """A run stopped after the tracker finished reads its commands back instead of tracking
+    again; other targets, another k or a file that does not read are tracked afresh."""
+    arm_s, arm_c = arms
+    programs = np.stack([circle(0.5)])
+    targets = arm_s.rollout(programs, backend="c")
+    path = tmp_path / "mpc_commands.npz"
+    commands, info = mpc.track(arm_c, targets, 2, programs, result_path=path)
+    assert path.is_file() and not info["reused"]
+    planned = []
+    real = mpc._gauss_newton
+    monkeypatch.setattr(mpc, "_gauss_newton", lambda *a: planned.append(1) or real(*a))
+    again, info = mpc.track(arm_c, targets, 2, programs, result_path=path)
+    assert info["reused"] and not planned
+    np.testing.assert_array_equal(again, commands)
+    for other_targets, k in ((targets + 1e-3, 2), (targets, 3)):
+        _, info = mpc.track(arm_c, other_targets, k, programs, result_path=path)
+        assert not info["reused"] and planned
+        planned.clear()
+    path.write_bytes(b"not an npz")
+    fresh, info = mpc.track(arm_c, targets, 2, programs, result_path=path)
+    assert not info["reused"] and planned
+    np.testing.assert_allclose(fresh, commands, rtol=0, atol=1e-12)
+    assert not [p for p in tmp_path.iterdir() if p.name != path.name]  # no temporaries left

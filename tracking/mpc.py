@@ -17,13 +17,16 @@ teacher (`ccgan.distill`).
 from __future__ import annotations
 
 import dataclasses
+import hashlib
 import os
 import time
+from pathlib import Path
 
 import numpy as np
 from mujoco import rollout as mj_rollout
 
 from mjx_arm.arm import POSE_DIM, Arm, SimState
+from mjx_arm.atomic import write_atomically
 
 
 @dataclasses.dataclass(frozen=True)
@@ -148,6 +151,7 @@ def track(
     init_program: np.ndarray,
     cfg: MpcConfig = MpcConfig(),
     progress: bool = False,
+    result_path: str | os.PathLike | None = None,
 ) -> tuple[np.ndarray, dict]:
     """D_c commands that track target poses, one source step at a time.
 
@@ -159,15 +163,27 @@ def track(
         e.g. the source program itself (the stretch program's commands).
       cfg: the tracker's settings.
       progress: show a progress bar over source steps.
+      result_path: optional .npz file. A result of the same tracking (arm, targets, start, k,
+        settings) found there is returned without tracking again; otherwise the result is
+        written there, so that a run stopped later (at a deadline) and started again does not
+        redo minutes of tracking.
 
     Returns:
       (commands [T * k, 3] or [S, T * k, 3] (bar), each held k periods; info: "cost" [T] or
-      [S, T] (squared residual of the applied step), "wall_s").
+      [S, T] (squared residual of the applied step), "wall_s", "reused" (read from
+      result_path)).
     """
     single, targets, init = _batched(target_poses, init_program, k, cfg)
     n_prog, n_steps, _ = targets.shape
     init = np.clip(init, arm_c.valve.p_min_bar, arm_c.valve.p_max_bar)
     t0 = time.perf_counter()
+    path = None if result_path is None else Path(result_path)
+    fingerprint = _fingerprint(arm_c, targets, init, k, cfg)
+    stored = _stored_result(path, fingerprint)
+    if stored is not None:
+        commands, cost = stored
+        info = {"cost": cost[0] if single else cost, "wall_s": 0.0, "reused": True}
+        return (commands[0] if single else commands), info
     state = arm_c.rest_state(n_prog)
     applied = np.zeros((n_prog, n_steps, 3))
     cost = np.zeros((n_prog, n_steps))
@@ -193,5 +209,32 @@ def track(
             if n + horizon < n_steps:
                 plan = np.concatenate([plan, init[:, n + horizon, None]], 1)
     commands = np.repeat(applied, k, axis=1)
-    info = {"cost": cost[0] if single else cost, "wall_s": time.perf_counter() - t0}
+    if path is not None:
+        arrays = {"fingerprint": np.asarray(fingerprint), "commands": commands, "cost": cost}
+        write_atomically(path, lambda f: np.savez(f, **arrays))
+    wall_s = time.perf_counter() - t0
+    info = {"cost": cost[0] if single else cost, "wall_s": wall_s, "reused": False}
     return (commands[0] if single else commands), info
+
+
+def _fingerprint(arm_c: Arm, targets, init, k: int, cfg: MpcConfig) -> str:
+    """What the tracker's commands depend on: the arm, the targets, the start, k, the settings."""
+    digest = hashlib.sha256()
+    for array in (targets, init):
+        digest.update(np.ascontiguousarray(array, np.float64).tobytes())
+    digest.update(repr((arm_c.model_hash, k, dataclasses.asdict(cfg))).encode())
+    return digest.hexdigest()[:16]
+
+
+def _stored_result(path: Path | None, fingerprint: str):
+    """(commands [S, T * k, 3], cost [S, T]) stored at path by the same tracking, else None (no
+    file, another tracking's, or one that does not read)."""
+    if path is None or not path.is_file():
+        return None
+    try:
+        with np.load(path) as f:
+            if str(f["fingerprint"]) != fingerprint:
+                return None
+            return f["commands"], f["cost"]
+    except (OSError, ValueError, KeyError):
+        return None

@@ -73,9 +73,11 @@ def start_commands(
     k: int,
     cfg: OracleConfig,
     progress: bool = False,
+    result_path: str | os.PathLike | None = None,
 ) -> np.ndarray:
     """Where the oracle starts (`OracleConfig.init`): the receding-horizon tracker's commands
-    ("mpc", `tracking.mpc.track` in MuJoCo C) or the stretch program ("stretch").
+    ("mpc", `tracking.mpc.track` in MuJoCo C, kept in result_path when given) or the stretch
+    program ("stretch").
 
     Args:
       arm_c: the D_c arm.
@@ -89,7 +91,9 @@ def start_commands(
       [T * k, 3] or [S, T * k, 3] commands (bar), each held k periods.
     """
     if cfg.init == "mpc":
-        commands, _ = mpc.track(arm_c, target_poses, k, source_programs, progress=progress)
+        commands, _ = mpc.track(
+            arm_c, target_poses, k, source_programs, progress=progress, result_path=result_path
+        )
         return commands
     return held_lib.stretch(source_programs, k)
 
