@@ -278,7 +278,8 @@ class Attempt:
     Args:
       log_path: where the command's stdout and stderr go (appended); None: this process's own.
       env: the command's environment; None: this process's.
-      jobs: how many stages the run let share the machine (recorded: wall times depend on it).
+      jobs: how many stages the run let share the machine (recorded with the machine: wall
+        times depend on both).
       device: the accelerator the command was given, recorded (its env sets it).
     """
 
@@ -298,6 +299,7 @@ class Attempt:
             "started": datetime.datetime.now().isoformat(timespec="seconds"),
             "wall_s": None,
             "jobs": jobs,  # the most stages the run let share the machine
+            "machine": machine(),  # a stage resumed on another machine names each one
         }
         if device is not None:
             self.entry["device"] = device  # the accelerator it was given (CUDA_VISIBLE_DEVICES)

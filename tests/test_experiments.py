@@ -174,6 +174,7 @@ def test_jobs_run_independent_stages_at_once_and_dependants_after(fake):
     assert (chain.folder("c") / "stage.log").read_text().strip() == "done c"
     assert "stage.log" in chain.manifest("c")["files"]
     assert all(chain.manifest(n)["attempts"][0]["jobs"] == 2 for n in "abc")
+    assert all(chain.manifest(n)["attempts"][0]["machine"] == stages_lib.machine() for n in "abc")
     logs.clear()
     run_stages(chain, list(chain.stages), jobs=2, log=logs.append, poll_s=0.1)
     assert sum("skipped" in line for line in logs) == 3
