@@ -294,7 +294,8 @@ def finish_oracle(plan: Plan, future: _InThread | None, run: RunLog) -> dict[str
         out[shape] = (cmds[i], oracle_poses[i], losses, info["best_loss"][i])
     run.log(
         f"oracle: {len(cfg.shapes)} shapes x {plan.horizon} steps optimised together,"
-        f" {cfg.oracle.steps} Adam steps, {timings['oracle_s']:.1f} s"
+        f" {cfg.oracle.steps} Adam steps, {timings['oracle_s']:.1f} s in this run,"
+        f" {sum(info['step_wall_s']):.1f} s over every run that kept its progress"
         f" (first step incl. compiling {timings['oracle_first_step_s']:.1f} s, then"
         f" {timings['oracle_step_s_median']:.1f} s per step;"
         f" waited {timings['oracle_wait_s']:.1f} s for it after the rollouts)"

@@ -10,7 +10,7 @@ import json
 from pathlib import Path
 
 from eval.report import METHOD_NAMES, PAPER_TABLE_I
-from experiments.stages import Chain, digest
+from experiments.stages import Chain, digest, shown_command
 
 #: The stages whose shapes.json the report reads: the D_c medium, and the aged arm.
 TABLE_STAGE, AGED_TABLE_STAGE = "table", "table_aged"
@@ -48,10 +48,13 @@ def stage_lines(chain: Chain) -> list[str]:
         " others ('stages at once' above 1) ran slower than it would alone, and the chain took"
         " less than this sum.",
         "",
-        "Commands, in order:",
+        "Commands, in order (DIR is the run folder, `--out`; a stage resumed on another machine"
+        " ran from another folder, which its stage.json names):",
         "",
     ]
-    lines += [f"- `{chain.manifest(n)['command']}`" for n in chain.stages]
+    # From the config, not the manifests: every command then names the same run folder.
+    as_run_by_hand = Chain(list(chain.stages.values()), Path("DIR"), chain.repo)
+    lines += [f"- `{shown_command(as_run_by_hand, n)}`" for n in chain.stages]
     return lines
 
 
@@ -89,7 +92,8 @@ def paper_lines(results: dict) -> list[str]:
 
 def _count(shapes: list[str], ok) -> str:
     passed = [s for s in shapes if ok(s)]
-    verdict = "met" if len(passed) == len(shapes) else "not met"
+    missed = [s for s in shapes if s not in passed]
+    verdict = f"not met (missed on {', '.join(missed)})" if missed else "met"
     return f"{len(passed)} of {len(shapes)} shapes: {verdict}"
 
 

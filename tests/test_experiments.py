@@ -307,6 +307,8 @@ def test_quick_chain_runs_end_to_end_then_skips_everything(tmp_path, capsys):
     text = (tmp_path / "run" / "paper.md").read_text()
     assert "| circle | 2.98 / 0.276 | 7.14 / 0.636 |" in text
     assert "the five shapes were used only for the tables below" in text
+    # Its commands name the run folder DIR, as a person would rerun them anywhere.
+    assert "--out DIR/table" in text and str(tmp_path) not in text
     _, stages = load_config(config)
     chain = Chain(stages, tmp_path / "run", paper.REPO)
     assert all(chain.status(s.name) == "done" for s in stages)
