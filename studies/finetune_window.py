@@ -13,7 +13,6 @@ averaged over seeds.
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 import numpy as np
@@ -23,6 +22,7 @@ from bench import run_header
 from ccgan import load_translator
 from ccgan.cli import cli_parser
 from mjx_arm.programs import CONTROL_HZ, SHAPES
+from studies import write_study
 from tracking import held, metrics
 
 
@@ -53,17 +53,13 @@ def main(argv=None) -> None:
                 "x_err_cm_60s": float(err.mean()),
             }
     header = run_header("studies.finetune_window", argv)
-    result = header | {"window_s": a.window, "seeds": a.seeds, "rows": rows}
-    out = Path(a.out)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    out.with_suffix(".json").write_text(json.dumps(result, indent=2))
-    lines = [f"# Translators: X_err (cm), first {a.window:g} s from rest / whole 60 s", ""]
-    lines += [f"- {k}: {v}" for k, v in header.items()]
-    lines += ["", "| shape | " + " | ".join(a.folders) + " |", "|---" * (len(a.folders) + 1) + "|"]
+    result = {"window_s": a.window, "seeds": a.seeds, "rows": rows}
+    lines = ["", "| shape | " + " | ".join(a.folders) + " |", "|---" * (len(a.folders) + 1) + "|"]
     for name, r in rows.items():
         cells = [f"{r[f]['x_err_cm_window']:.4f} / {r[f]['x_err_cm_60s']:.4f}" for f in a.folders]
         lines.append(f"| {name} | " + " | ".join(cells) + " |")
-    out.with_suffix(".md").write_text("\n".join(lines) + "\n")
+    title = f"Translators: X_err (cm), first {a.window:g} s from rest / whole 60 s"
+    write_study(a.out, header, result, title, lines)
     print("\n".join(lines))
 
 

@@ -14,9 +14,7 @@ the commands there to reach poses the valve range cannot hold (statics).
 
 from __future__ import annotations
 
-import json
 import time
-from pathlib import Path
 
 import numpy as np
 
@@ -24,6 +22,7 @@ import mjx_arm
 from bench import run_header
 from ccgan.cli import cli_parser
 from mjx_arm.programs import shape_like_programs
+from studies import write_study
 from tracking import held, metrics, mpc
 
 
@@ -77,19 +76,14 @@ def main(argv=None) -> None:
     header = run_header("studies.mpc_saturation", argv)
     rest = arm_s.rest_pose()
     excursion = [metrics.tip_excursion_cm(target, rest) for target in targets]
-    result = header | {
+    result = {
         "model": a.model,
         "n": a.n,
         "duration_s": a.duration,
         "tip_excursion_cm": excursion,
         "rows": rows,
     }
-    out = Path(a.out)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    out.with_suffix(".json").write_text(json.dumps(result, indent=2))
-    lines = [f"# Receding-horizon tracking on {a.model}: saturation against k and settings", ""]
-    lines += [f"- {key}: {value}" for key, value in header.items()]
-    lines += [
+    lines = [
         f"- {a.n} held-out shape-like programs of {a.duration:g} s (split mpc_study, full"
         f" scale); tip excursion of the targets {np.mean(excursion):.2f} cm (mean)",
         "",
@@ -107,7 +101,13 @@ def main(argv=None) -> None:
             f" {xm / xs:.2f} | {r['saturated_mpc']:.0%} | {r['saturated_stretch']:.0%} |"
             f" {r['wall_s']:.0f} |"
         )
-    out.with_suffix(".md").write_text("\n".join(lines) + "\n")
+    write_study(
+        a.out,
+        header,
+        result,
+        f"Receding-horizon tracking on {a.model}: saturation against k and settings",
+        lines,
+    )
 
 
 if __name__ == "__main__":

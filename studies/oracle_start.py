@@ -11,15 +11,13 @@ the best loss and the X_err (cm) of the returned commands in MuJoCo C. The mpc s
 
 from __future__ import annotations
 
-import json
-from pathlib import Path
-
 import numpy as np
 
 import mjx_arm
 from bench import run_header
 from ccgan.cli import cli_parser
 from mjx_arm.programs import CONTROL_HZ, SHAPES
+from studies import write_study
 from tracking import held, metrics, mpc
 from tracking.oracle import OracleConfig, oracle_commands
 
@@ -60,13 +58,8 @@ def main(argv=None) -> None:
         )
         print(f"{run}: best loss {np.round(info['best_loss'], 5)}; {info['wall_s']:.0f} s")
     header = run_header("studies.oracle_start", argv)
-    result = header | {"shapes": a.shapes, "horizon_s": a.horizon, "steps": a.steps, "rows": rows}
-    out = Path(a.out)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    out.with_suffix(".json").write_text(json.dumps(result, indent=2))
-    lines = [f"# Oracle start and step size: {', '.join(a.shapes)}, first {a.horizon:g} s", ""]
-    lines += [f"- {key}: {value}" for key, value in header.items()]
-    lines += [
+    result = {"shapes": a.shapes, "horizon_s": a.horizon, "steps": a.steps, "rows": rows}
+    lines = [
         "",
         "Loss (cm^2) of the first and last iterates and the best; X_err (cm) of the start and of"
         " the returned (best) commands in MuJoCo C, mean over the shapes.",
@@ -81,7 +74,13 @@ def main(argv=None) -> None:
             f" {np.mean(r['best_loss']):.5f} | {np.mean(r['x_err_cm_start']):.4f} |"
             f" {np.mean(r['x_err_cm_best']):.4f} | {r['wall_s']:.0f} |"
         )
-    out.with_suffix(".md").write_text("\n".join(lines) + "\n")
+    write_study(
+        a.out,
+        header,
+        result,
+        f"Oracle start and step size: {', '.join(a.shapes)}, first {a.horizon:g} s",
+        lines,
+    )
 
 
 if __name__ == "__main__":

@@ -15,9 +15,6 @@ after the window drifts on long programs; one whose ratio stays the same does no
 
 from __future__ import annotations
 
-import json
-from pathlib import Path
-
 import matplotlib
 
 matplotlib.use("Agg")
@@ -29,6 +26,7 @@ from bench import run_header  # noqa: E402
 from ccgan.cli import cli_parser  # noqa: E402
 from ccgan.translator import TRANSLATORS_DIR, load_translator  # noqa: E402
 from mjx_arm.programs import shape_like_programs  # noqa: E402
+from studies import write_study  # noqa: E402
 from tracking import held, metrics, mpc  # noqa: E402
 
 #: The chain's distilled translators, one per seed.
@@ -94,7 +92,7 @@ def main(argv=None) -> None:
     header = run_header("studies.program_length", argv)
     rest = arm_s.rest_pose()
     excursion = [metrics.tip_excursion_cm(target, rest) for target in targets]
-    result = header | {
+    result = {
         "model": a.model,
         "translators": a.translators,
         "k": k,
@@ -106,13 +104,7 @@ def main(argv=None) -> None:
         "x_err_cm": errors,
         "x_err_cm_per_program": {name: err.mean(-1).tolist() for name, err in x_err.items()},
     }
-    out = Path(a.out)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    out.with_suffix(".json").write_text(json.dumps(result, indent=2))
-
-    lines = [f"# A distilled translator over long programs, on {a.model}", ""]
-    lines += [f"- {key}: {value}" for key, value in header.items()]
-    lines += [
+    body = [
         f"- {a.n} held-out shape-like programs of {a.duration:g} s (split length_study, full"
         f" scale); tip excursion of the targets {np.mean(excursion):.2f} cm (mean); k = {k};"
         f" teacher: receding-horizon tracking over {a.horizon_steps} source steps",
@@ -125,9 +117,13 @@ def main(argv=None) -> None:
         "|---|---|---|---|",
     ]
     for name, e in errors.items():
-        cells = [f"{e[p]:.3f} ({e[p] / teacher[p]:.2f})" for p in ("window", "after", "whole")]
-        lines.append(f"| {name} | " + " | ".join(cells) + " |")
-    out.with_suffix(".md").write_text("\n".join(lines) + "\n")
+        cells = [
+            f"{e[part]:.3f} ({e[part] / teacher[part]:.2f})"
+            for part in ("window", "after", "whole")
+        ]
+        body.append(f"| {name} | " + " | ".join(cells) + " |")
+    title = f"A distilled translator over long programs, on {a.model}"
+    md = write_study(a.out, header, result, title, body)
 
     fig, ax = plt.subplots(figsize=(9, 4))
     t = np.arange(targets.shape[1]) / STEPS_PER_S
@@ -138,8 +134,8 @@ def main(argv=None) -> None:
     ax.set_title(f"{a.n} held-out programs of {a.duration:g} s in D_c")
     ax.legend(fontsize=8)
     fig.tight_layout()
-    fig.savefig(out.with_suffix(".png"), dpi=110)
-    print(out.with_suffix(".md").read_text())
+    fig.savefig(md.with_suffix(".png"), dpi=110)
+    print(md.read_text())
 
 
 if __name__ == "__main__":

@@ -9,13 +9,11 @@ paper chain distils its translators at these k (`experiments/paper.json`).
 
 from __future__ import annotations
 
-import json
-from pathlib import Path
-
 import mjx_arm
 from bench import run_header
 from ccgan.cli import cli_parser
 from mjx_arm.programs import validation_program
+from studies import write_study
 from tracking.held import choose_stretch_k
 
 #: The candidates `eval.shapes` tries (its EvalConfig.hold_factors).
@@ -36,20 +34,14 @@ def main(argv=None) -> None:
         rows[domain] = {"k": k, "x_err_cm": {str(c): e for c, e in errors.items()}}
         print(f"{domain}: k = {k}")
     header = run_header("studies.stretch_k", argv)
-    out = Path(a.out)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    out.with_suffix(".json").write_text(
-        json.dumps(header | {"model": a.model, "rows": rows}, indent=2)
-    )
-    lines = [f"# Stretch factor k on the validation program, {a.model}", ""]
-    lines += [f"- {key}: {value}" for key, value in header.items()]
-    lines += ["", "Mean X_err (cm) of the stretched validation program, per k.", ""]
+    lines = ["", "Mean X_err (cm) of the stretched validation program, per k.", ""]
     lines += ["| domain | k | " + " | ".join(f"k={c}" for c in CANDIDATES) + " |"]
     lines += ["|---|---|" + "---|" * len(CANDIDATES)]
     for domain, row in rows.items():
         errs = " | ".join(f"{row['x_err_cm'][str(c)]:.3f}" for c in CANDIDATES)
         lines.append(f"| {domain} | {row['k']} | {errs} |")
-    out.with_suffix(".md").write_text("\n".join(lines) + "\n")
+    title = f"Stretch factor k on the validation program, {a.model}"
+    write_study(a.out, header, {"model": a.model, "rows": rows}, title, lines)
 
 
 if __name__ == "__main__":
