@@ -52,7 +52,7 @@ import mujoco
 import numpy as np
 
 from mjx_arm import babble
-from mjx_arm.machine import cpu_model
+from mjx_arm.machine import cpu_model, usable_cores
 from mjx_arm.programs import babble_programs
 
 
@@ -169,7 +169,7 @@ def run_bench(args) -> dict:
             print(f"mjx {label} B={batch}: " + _fmt(row), flush=True)
             write(result, args.out)
         if batch <= args.c_max_batch or batch == min(args.sizes):
-            threads = min(os.cpu_count() or 1, batch, babble.C_MAX_CHUNK)
+            threads = min(usable_cores(), batch, babble.C_MAX_CHUNK)
             row = {"batch": batch, "threads": threads}
             row.update(time_c(arm, programs, args.c_repeats))
             row.update(rates(batch, args.seconds, arm.timestep_s, row["wall_s"]))

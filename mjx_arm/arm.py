@@ -27,6 +27,7 @@ from mujoco import rollout as mj_rollout
 from mjx_arm import checks, constants, domains, valve
 from mjx_arm.checks import check_pressures, validate_model
 from mjx_arm.constants import POSE_DIM
+from mjx_arm.machine import usable_cores
 
 #: A trajectory whose joint speed exceeds this (rad/s or m/s) is treated as diverged.
 MAX_JOINT_SPEED = 1.0e3
@@ -254,7 +255,7 @@ class Arm:
     @staticmethod
     def _pool(n_batch: int, chunk: int) -> mj_rollout.Rollout:
         """A thread pool for MuJoCo C rollouts of `n_batch` trajectories, `chunk` at a time."""
-        return mj_rollout.Rollout(nthread=min(os.cpu_count() or 1, n_batch, max(chunk, 1)))
+        return mj_rollout.Rollout(nthread=min(usable_cores(), n_batch, max(chunk, 1)))
 
     def _rollout_c(self, batched: np.ndarray, with_qpos: bool = False, chunk: int = C_CHUNK):
         commands = valve.saturate(batched, self.valve, xp=np)

@@ -43,7 +43,7 @@ from tqdm import tqdm
 import mjx_arm
 from mjx_arm import constants, cosserat, fidelity_report, valve
 from mjx_arm.arm import time_constant_63
-from mjx_arm.machine import cpu_model
+from mjx_arm.machine import cpu_model, usable_cores
 from mjx_arm.model_gen import ArmParams, generate_xml
 from mjx_arm.programs import full_range_program, held_program
 
@@ -254,7 +254,7 @@ def compare(n_segments: int, domain: str, ref: dict) -> dict:
             "mujoco_c_sim_s_per_wall_s": float(
                 babble.shape[0] * babble.shape[1] / constants.CONTROL_HZ / babble_wall
             ),
-            "mujoco_c_threads": int(min(os.cpu_count() or 1, babble.shape[0])),
+            "mujoco_c_threads": int(min(usable_cores(), babble.shape[0])),
         },
     }
 

@@ -16,6 +16,30 @@ def cpu_model() -> str:
     return platform.processor() or "unknown CPU"
 
 
+#: Environment variable that sets how many threads this process's MuJoCo C rollouts use.
+THREADS_ENV = "SOFTARM_THREADS"
+
+
+def usable_cores() -> int:
+    """Threads for this process's MuJoCo C rollouts and receding-horizon tracking.
+
+    $SOFTARM_THREADS when set; else the cores the process may run on (its CPU affinity: what a
+    cluster job or `taskset` allots, where os.cpu_count() would name every core of the node and
+    start a thread for each); else os.cpu_count().
+
+    Raises:
+      ValueError: $SOFTARM_THREADS is not a positive integer.
+    """
+    asked = os.environ.get(THREADS_ENV)
+    if asked:
+        if not asked.strip().isdigit() or int(asked) < 1:
+            raise ValueError(f"${THREADS_ENV}={asked!r}: give a positive number of threads")
+        return int(asked)
+    if hasattr(os, "sched_getaffinity"):
+        return max(len(os.sched_getaffinity(0)), 1)
+    return os.cpu_count() or 1
+
+
 #: Environment variable JAX reads for its persistent compilation cache folder.
 CACHE_ENV = "JAX_COMPILATION_CACHE_DIR"
 

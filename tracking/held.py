@@ -9,11 +9,10 @@ periods, every k-th pose, is what is compared with the D_s target [T, 6].
 
 from __future__ import annotations
 
-import os
-
 import numpy as np
 from tqdm import tqdm
 
+from mjx_arm.machine import usable_cores
 from tracking import metrics
 
 
@@ -50,7 +49,7 @@ def rollout_grouped(
     for i, (cmd, k) in enumerate(jobs):
         groups.setdefault((np.shape(cmd), int(k)), []).append(i)
     out: list[np.ndarray | None] = [None] * len(jobs)
-    batch = 2 * (os.cpu_count() or 1) if progress and backend == "c" else len(jobs)
+    batch = 2 * usable_cores() if progress and backend == "c" else len(jobs)
     with tqdm(total=len(jobs), desc=progress, unit="traj", disable=not progress) as bar:
         for (_, k), index in groups.items():
             for start in range(0, len(index), max(batch, 1)):

@@ -27,6 +27,7 @@ from mujoco import rollout as mj_rollout
 
 from mjx_arm.arm import POSE_DIM, Arm, SimState
 from mjx_arm.atomic import write_atomically
+from mjx_arm.machine import usable_cores
 
 
 @dataclasses.dataclass(frozen=True)
@@ -193,7 +194,7 @@ def track(
         from tqdm import tqdm
 
         steps = tqdm(steps, desc="mpc", unit="step")
-    with mj_rollout.Rollout(nthread=os.cpu_count() or 1) as pool:
+    with mj_rollout.Rollout(nthread=usable_cores()) as pool:
         for n in steps:
             horizon = plan.shape[1]
             target = targets[:, None, n : n + horizon]
