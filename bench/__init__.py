@@ -5,7 +5,11 @@ results are in bench/results/<machine>/. Studies of accuracy rather than speed l
 docs/benchmarks.md lists every benchmark and study with its numbers.
 """
 
+import json
 import sys
+from pathlib import Path
+
+from mjx_arm.atomic import write_atomically
 
 
 def run_header(module: str, argv: list[str] | None) -> dict:
@@ -22,3 +26,16 @@ def run_header(module: str, argv: list[str] | None) -> dict:
         "jax": jax.__version__,
         "command": " ".join([f"python -m {module}", *args]),
     }
+
+
+def write_results(out: str | Path, header: dict, result: dict, title: str, body: list[str]) -> Path:
+    """Writes a benchmark's or study's results: OUT.json (`header | result`) and OUT.md (the
+    title, the header as a list, then the body lines), each file whole or not at all, so a run
+    stopped while writing leaves the earlier results readable. Returns the .md file's path."""
+    out = Path(out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    data = json.dumps(header | result, indent=2).encode()
+    write_atomically(out.with_suffix(".json"), lambda f: f.write(data))
+    lines = [f"# {title}", "", *(f"- {key}: {value}" for key, value in header.items()), *body]
+    text = ("\n".join(lines) + "\n").encode()
+    return write_atomically(out.with_suffix(".md"), lambda f: f.write(text))

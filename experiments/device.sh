@@ -8,7 +8,8 @@
 # Each call: installs the carried wheels (bench/device/install.sh); restores the run folder from
 # a carried .paper_state/paper_state.tar.gz when the machine does not hold it already; runs
 # `python -m experiments.paper --out $TMP/paper --jobs ${JOBS:-4} --deadline-s ${DEADLINE_S:-500}`
-# (up to JOBS stages share the GPU; a stage stopped at the deadline keeps its folder and continues
+# (up to JOBS stages at once, of which one training per GPU: the config's "gpu" stages take
+# turns; a stage stopped at the deadline keeps its folder and continues
 # in the next call); puts into $OUT the whole run folder as paper_state.tar.gz.part-NN (pieces of
 # 15 MiB: the device returns no larger file) with paper_state.sha256, plus paper.md, the log and
 # the GPU's use sampled every 15 s. The deadline, the 60 s a stopped stage may take to end its

@@ -68,12 +68,17 @@ class Stage:
         finished folder of stage NAME (which makes NAME an input), `{file:PATH}` a file of the
         repository whose hash joins the key (the arm's MJCF).
       about: one line for the report: what the stage makes.
+      gpu: the stage keeps an accelerator busy (a training). With several stages at once, at
+        most one such stage runs on each GPU, the others beside it being stages that are not:
+        trainings sharing one GPU finish fewer epochs together than one after another
+        (bench/results/h200/sharing.md). Not part of the stage's key.
     """
 
     name: str
     module: str
     args: tuple[str, ...]
     about: str = ""
+    gpu: bool = False
 
     @property
     def inputs(self) -> tuple[str, ...]:
@@ -94,8 +99,8 @@ class Stage:
 
 
 def load_config(path: str | os.PathLike) -> tuple[dict, list[Stage]]:
-    """Reads a chain's config: a JSON object with "stages", a list of {name, module, args, about}
-    (args: one shell-quoted string, or a list).
+    """Reads a chain's config: a JSON object with "stages", a list of {name, module, args, about,
+    gpu} (args: one shell-quoted string, or a list; about and gpu optional).
 
     Raises:
       StageError: a malformed config, a repeated stage name, or a stage that reads a stage
@@ -118,9 +123,12 @@ def load_config(path: str | os.PathLike) -> tuple[dict, list[Stage]]:
                     else [str(a) for a in raw["args"]]
                 ),
                 about=raw.get("about", ""),
+                gpu=raw.get("gpu", False),
             )
         except (KeyError, TypeError) as err:
             raise StageError(f"{path}: stage {i} lacks {err} (name, module, args)") from err
+        if not isinstance(stage.gpu, bool):
+            raise StageError(f"{path}: stage {stage.name}: gpu must be true or false")
         if not re.fullmatch(r"[a-z][a-z0-9_]*", stage.name) or stage.name in seen:
             raise StageError(f"{path}: stage name {stage.name!r} is not a new lower-case name")
         missing = [n for n in stage.inputs if n not in seen]
@@ -513,6 +521,8 @@ class _Scheduler:
         self.running: dict[str, tuple[Attempt, dict, list]] = {}
         self.failures: list[StageError] = []
         self.devices = {str(d): 0 for d in devices}  # GPU id -> stages running on it
+        # GPU id ("" without --devices: the one accelerator) -> gpu stages running on it
+        self.gpu_busy = {d: 0 for d in self.devices} if self.devices else {"": 0}
 
     def ready(self) -> list[str]:
         chain = self.chain
@@ -527,6 +537,8 @@ class _Scheduler:
             for name in self.ready():
                 if len(self.running) >= self.jobs or self.failures:
                     return
+                if self.chain.stages[name].gpu and self._free_gpu() is None:
+                    continue  # waits for a GPU without a training; others may start
                 self.waiting.remove(name)
                 begun = _begin(self.chain, name, name in self.redo, self.log)
                 if begun is None:
@@ -534,11 +546,21 @@ class _Scheduler:
                     continue
                 self._start(name, begun)
 
+    def _free_gpu(self) -> str | None:
+        """A GPU no gpu stage runs on, the least busy first ("" for the one accelerator)."""
+        free = [d for d, n in self.gpu_busy.items() if n == 0]
+        return min(free, key=lambda d: self.devices.get(d, 0)) if free else None
+
     def _start(self, name: str, begun: tuple[dict, list[dict]]) -> None:
         log_path = self.chain.log_path(name)
         env, device = self.env, None
-        if self.devices:
+        if self.chain.stages[name].gpu:
+            gpu = self._free_gpu()  # launch() made sure there is one
+            self.gpu_busy[gpu] += 1
+            device = gpu or None  # "": the one accelerator, no CUDA_VISIBLE_DEVICES
+        elif self.devices:
             device = min(self.devices, key=self.devices.get)  # the least busy, first on a tie
+        if device is not None:
             self.devices[device] += 1
             env = env | {"CUDA_VISIBLE_DEVICES": device}
         attempt = Attempt(
@@ -548,17 +570,19 @@ class _Scheduler:
         self.log(f"[{name}] started{on}; its output goes to {log_path}")
         self.running[name] = (attempt, *begun)
 
-    def _release(self, attempt: Attempt) -> None:
+    def _release(self, name: str, attempt: Attempt) -> None:
         device = attempt.entry.get("device")
         if device is not None:
             self.devices[device] -= 1
+        if self.chain.stages[name].gpu:
+            self.gpu_busy[device or ""] -= 1
 
     def reap(self) -> None:
         for name, (attempt, key, attempts) in list(self.running.items()):
             if attempt.process.poll() is None:
                 continue
             del self.running[name]
-            self._release(attempt)
+            self._release(name, attempt)
             rc = attempt.close()
             if rc == 0:
                 _finish(self.chain, name, key, attempts, self.log)

@@ -18,11 +18,10 @@ from pathlib import Path
 import numpy as np
 
 import mjx_arm
-from bench import run_header
+from bench import run_header, write_results
 from ccgan import load_translator
 from ccgan.cli import cli_parser
 from mjx_arm.programs import CONTROL_HZ, SHAPES
-from studies import write_study
 from tracking import held, metrics
 
 
@@ -59,7 +58,7 @@ def main(argv=None) -> None:
         cells = [f"{r[f]['x_err_cm_window']:.4f} / {r[f]['x_err_cm_60s']:.4f}" for f in a.folders]
         lines.append(f"| {name} | " + " | ".join(cells) + " |")
     title = f"Translators: X_err (cm), first {a.window:g} s from rest / whole 60 s"
-    write_study(a.out, header, result, title, lines)
+    write_results(a.out, header, result, title, lines)
     print("\n".join(lines))
 
 

@@ -19,10 +19,9 @@ import time
 import numpy as np
 
 import mjx_arm
-from bench import run_header
+from bench import run_header, write_results
 from ccgan.cli import cli_parser
 from mjx_arm.programs import shape_like_programs
-from studies import write_study
 from tracking import held, metrics, mpc
 
 
@@ -101,7 +100,7 @@ def main(argv=None) -> None:
             f" {xm / xs:.2f} | {r['saturated_mpc']:.0%} | {r['saturated_stretch']:.0%} |"
             f" {r['wall_s']:.0f} |"
         )
-    write_study(
+    write_results(
         a.out,
         header,
         result,

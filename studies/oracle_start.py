@@ -14,10 +14,9 @@ from __future__ import annotations
 import numpy as np
 
 import mjx_arm
-from bench import run_header
+from bench import run_header, write_results
 from ccgan.cli import cli_parser
 from mjx_arm.programs import CONTROL_HZ, SHAPES
-from studies import write_study
 from tracking import held, metrics, mpc
 from tracking.oracle import OracleConfig, oracle_commands
 
@@ -74,7 +73,7 @@ def main(argv=None) -> None:
             f" {np.mean(r['best_loss']):.5f} | {np.mean(r['x_err_cm_start']):.4f} |"
             f" {np.mean(r['x_err_cm_best']):.4f} | {r['wall_s']:.0f} |"
         )
-    write_study(
+    write_results(
         a.out,
         header,
         result,

@@ -22,11 +22,10 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 import mjx_arm  # noqa: E402
-from bench import run_header  # noqa: E402
+from bench import run_header, write_results  # noqa: E402
 from ccgan.cli import cli_parser  # noqa: E402
 from ccgan.translator import TRANSLATORS_DIR, load_translator  # noqa: E402
 from mjx_arm.programs import shape_like_programs  # noqa: E402
-from studies import write_study  # noqa: E402
 from tracking import held, metrics, mpc  # noqa: E402
 
 #: The chain's distilled translators, one per seed.
@@ -123,7 +122,7 @@ def main(argv=None) -> None:
         ]
         body.append(f"| {name} | " + " | ".join(cells) + " |")
     title = f"A distilled translator over long programs, on {a.model}"
-    md = write_study(a.out, header, result, title, body)
+    md = write_results(a.out, header, result, title, body)
 
     fig, ax = plt.subplots(figsize=(9, 4))
     t = np.arange(targets.shape[1]) / STEPS_PER_S

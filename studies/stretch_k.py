@@ -10,10 +10,9 @@ paper chain distils its translators at these k (`experiments/paper.json`).
 from __future__ import annotations
 
 import mjx_arm
-from bench import run_header
+from bench import run_header, write_results
 from ccgan.cli import cli_parser
 from mjx_arm.programs import validation_program
-from studies import write_study
 from tracking.held import choose_stretch_k
 
 #: The candidates `eval.shapes` tries (its EvalConfig.hold_factors).
@@ -41,7 +40,7 @@ def main(argv=None) -> None:
         errs = " | ".join(f"{row['x_err_cm'][str(c)]:.3f}" for c in CANDIDATES)
         lines.append(f"| {domain} | {row['k']} | {errs} |")
     title = f"Stretch factor k on the validation program, {a.model}"
-    write_study(a.out, header, {"model": a.model, "rows": rows}, title, lines)
+    write_results(a.out, header, {"model": a.model, "rows": rows}, title, lines)
 
 
 if __name__ == "__main__":

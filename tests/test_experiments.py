@@ -212,6 +212,40 @@ def test_devices_give_each_running_stage_the_least_busy_gpu(fake):
     assert all(chain.manifest(n)["attempts"][0]["device"] == device[n] for n in "abc")
 
 
+def gpu_chain(tmp_path):
+    """a and c: trainings (gpu), d: not; all independent, 2 s each."""
+    config = {
+        "stages": [
+            {"name": n, "module": "fakestage", "args": f"--text {n} --sleep 2 --out {{dir}}"}
+            | ({"gpu": True} if n in "ac" else {})
+            for n in "acd"
+        ]
+    }
+    path = tmp_path / "chain.json"
+    path.write_text(json.dumps(config))
+    _, stages = load_config(path)
+    return Chain(stages, tmp_path / "run", tmp_path)
+
+
+def test_gpu_stages_take_turns_on_one_accelerator_beside_the_others(fake):
+    chain = gpu_chain(fake)
+    run_stages(chain, list(chain.stages), jobs=3, log=lambda _: None, poll_s=0.1)
+    (a0, a1), (c0, c1), (d0, d1) = (span(chain, n) for n in "acd")
+    assert c0 >= a1, "two gpu stages shared the accelerator"
+    assert max(a0, d0) < min(a1, d1), "the other stage did not run beside the first gpu stage"
+
+
+def test_gpu_stages_run_side_by_side_on_different_gpus(fake):
+    chain = gpu_chain(fake)
+    run_stages(
+        chain, list(chain.stages), jobs=3, devices=("0", "1"), log=lambda _: None, poll_s=0.1
+    )
+    (a0, a1), (c0, c1) = span(chain, "a"), span(chain, "c")
+    assert max(a0, c0) < min(a1, c1), "gpu stages on two GPUs did not overlap"
+    device = {n: (chain.folder(n) / "device.txt").read_text() for n in "ac"}
+    assert {device["a"], device["c"]} == {"0", "1"}
+
+
 def test_jobs_deadline_gives_all_stopped_stages_one_grace_period(fake, monkeypatch):
     """Commands that ignore SIGTERM are killed after one grace period, not one each."""
     monkeypatch.setattr(stages_lib, "STOP_GRACE_S", 2.0)
@@ -235,6 +269,7 @@ def test_selected_stages_need_their_inputs_done_or_selected(fake):
         ([{"name": "b", "module": "m", "args": "--in {stage:a}"}], "not defined before"),
         ([{"name": "a", "module": "m", "args": ""}] * 2, "not a new"),
         ([{"name": "a", "args": ""}], "lacks"),
+        ([{"name": "a", "module": "m", "args": "", "gpu": "yes"}], "gpu must be"),
         ([], "no stages"),
     ],
 )

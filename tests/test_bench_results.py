@@ -1,15 +1,16 @@
-"""studies.write_study: a study's .json and .md, each whole, and earlier results kept on failure."""
+"""bench.write_results: a benchmark's or study's .json and .md, each whole, earlier ones kept
+on failure."""
 
 import json
 
 import pytest
 
-from studies import write_study
+from bench import write_results
 
 
-def test_write_study_writes_the_header_into_both_files(tmp_path):
+def test_write_results_writes_the_header_into_both_files(tmp_path):
     header = {"device": "cpu: cpu", "command": "python -m studies.x --out y"}
-    md = write_study(tmp_path / "sub" / "x", header, {"rows": [1, 2]}, "A title", ["", "| a |"])
+    md = write_results(tmp_path / "sub" / "x", header, {"rows": [1, 2]}, "A title", ["", "| a |"])
     assert md == tmp_path / "sub" / "x.md"
     assert json.loads(md.with_suffix(".json").read_text()) == header | {"rows": [1, 2]}
     lines = md.read_text().splitlines()
@@ -19,9 +20,9 @@ def test_write_study_writes_the_header_into_both_files(tmp_path):
 
 
 def test_a_result_that_cannot_be_written_leaves_the_earlier_files(tmp_path):
-    write_study(tmp_path / "x", {}, {"rows": [1]}, "first", ["old"])
+    write_results(tmp_path / "x", {}, {"rows": [1]}, "first", ["old"])
     with pytest.raises(TypeError):
-        write_study(tmp_path / "x", {}, {"rows": object()}, "second", ["new"])
+        write_results(tmp_path / "x", {}, {"rows": object()}, "second", ["new"])
     assert json.loads((tmp_path / "x.json").read_text()) == {"rows": [1]}
     assert (tmp_path / "x.md").read_text().splitlines()[0] == "# first"
     assert sorted(p.name for p in tmp_path.iterdir()) == ["x.json", "x.md"]
