@@ -63,6 +63,8 @@ def main(argv=None) -> None:
     p.add_argument("--out", required=True, help="output prefix (writes .json, .md and .png)")
     a = p.parse_args(argv)
     window = int(round(a.window_s * STEPS_PER_S))
+    if not 0 < window < int(round(a.duration * STEPS_PER_S)):
+        p.error(f"--window-s {a.window_s} must be shorter than --duration {a.duration}")
     translators = [load_translator(path) for path in a.translators]
     ks = {tr.k for tr in translators}
     if len(ks) != 1:
@@ -71,8 +73,6 @@ def main(argv=None) -> None:
     arm_s, arm_c = mjx_arm.load(a.model, "source"), mjx_arm.load(a.model, "constrained")
     programs = shape_like_programs(a.n, a.duration, seed=0, split="length_study", full_scale=True)
     targets = arm_s.rollout(programs.astype(np.float64), backend="c")
-    if not 0 < window < targets.shape[1]:
-        p.error(f"--window-s {a.window_s} must be shorter than --duration {a.duration}")
 
     commands = {"stretch": held.stretch(programs, k)}
     for seed, tr in enumerate(translators):
