@@ -23,15 +23,17 @@
 #      (the run folder is still in /tmp/paper), until the command says every stage is done.
 #   If the machine was lost: carry [".whl"] with `RUN=0 bash experiments/device.sh`, then at once
 #   carry [".paper_state"] (the last returned state; the .whl and the state do not fit one call
-#   beside the tree) with `bash experiments/device.sh`.
+#   beside the tree) with `bash experiments/device.sh`. A second run beside a kept one uses its
+#   own folder: STATE_DIR=.paper_state_NAME here and there (carry [".paper_state_NAME"]).
 # Here, after each call: bash experiments/take_state.sh FILES_AT (joins and checks the pieces into
 # the git-ignored .paper_state/). Finished: bash experiments/take_state.sh FILES_AT runs/ unpacks
 # the run folder too; commit what docs/chain.md names.
 set -uo pipefail
 source "$(dirname "${BASH_SOURCE[0]}")/../bench/device/install.sh" || exit 1
 RUN_DIR=$TMP/paper
-if [[ ! -d $RUN_DIR && -f .paper_state/paper_state.tar.gz ]]; then
-  tar -xzf .paper_state/paper_state.tar.gz -C "$TMP" && echo "restored $RUN_DIR from .paper_state"
+STATE_DIR=${STATE_DIR:-.paper_state} # another run's state folder keeps runs apart (take_state.sh)
+if [[ ! -d $RUN_DIR && -f $STATE_DIR/paper_state.tar.gz ]]; then
+  tar -xzf "$STATE_DIR/paper_state.tar.gz" -C "$TMP" && echo "restored $RUN_DIR from $STATE_DIR"
 fi
 [[ ${RUN:-1} == 0 ]] && exit 0
 nvidia-smi --query-gpu=name,memory.total,driver_version --format=csv,noheader || true

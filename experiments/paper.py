@@ -53,7 +53,8 @@ def build_parser() -> argparse.ArgumentParser:
         type=int,
         default=1,
         help="run up to this many stages at once, each when its inputs are done (their outputs"
-        " go to DIR/NAME.log); small trainings leave one GPU mostly idle, so 3-4 share it well",
+        ' go to DIR/NAME.log); stages marked "gpu" in the config take turns on each GPU, the'
+        " others (babbling, planning, tracking on the host's cores) run beside them",
     )
     parser.add_argument(
         "--devices",

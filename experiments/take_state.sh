@@ -2,6 +2,8 @@
 # Runs HERE, after a call of experiments/device.sh: joins the returned pieces of the run folder
 # (paper_state.tar.gz.part-NN), checks them against paper_state.sha256 and keeps the whole file
 # as .paper_state/paper_state.tar.gz, which the next call restores from on a fresh machine.
+# STATE_DIR=.paper_state_NAME keeps a second run's state apart from the first (experiments/device.sh
+# reads the same variable).
 #
 #   bash experiments/take_state.sh FILES_AT          # FILES_AT: the folder the call's files lie in
 #   bash experiments/take_state.sh FILES_AT runs/    # and unpack the run folder into runs/paper
@@ -19,11 +21,12 @@ cat "$from"/paper_state.tar.gz.part-* >"$tmp/paper_state.tar.gz"
   echo "the joined state does not match $from/paper_state.sha256: .paper_state is unchanged" >&2
   exit 1
 }
-mkdir -p "$root/.paper_state"
-mv -f "$tmp/paper_state.tar.gz" "$root/.paper_state/paper_state.tar.gz"
-echo "kept $(du -h "$root/.paper_state/paper_state.tar.gz" | cut -f1) in .paper_state/"
+state_dir=$root/${STATE_DIR:-.paper_state}
+mkdir -p "$state_dir"
+mv -f "$tmp/paper_state.tar.gz" "$state_dir/paper_state.tar.gz"
+echo "kept $(du -h "$state_dir/paper_state.tar.gz" | cut -f1) in $state_dir/"
 if [[ -n ${2:-} ]]; then
   mkdir -p "$2"
-  tar -xzf "$root/.paper_state/paper_state.tar.gz" -C "$2"
+  tar -xzf "$state_dir/paper_state.tar.gz" -C "$2"
   echo "unpacked into $2/paper"
 fi
