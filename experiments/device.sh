@@ -21,6 +21,8 @@
 #   1. carry [".whl"]:   bash experiments/device.sh
 #   2.. carry nothing, each within the machine's 30 s warm window: bash experiments/device.sh
 #      (the run folder is still in /tmp/paper), until the command says every stage is done.
+#      A machine is held at most 30 minutes: three calls of ~520 s fit, a fourth does not; start
+#      the next machine as below.
 #   If the machine was lost: carry [".whl"] with `RUN=0 bash experiments/device.sh`, then at once
 #   carry [".paper_state"] (the last returned state; the .whl and the state do not fit one call
 #   beside the tree) with `bash experiments/device.sh`. A second run beside a kept one uses its
