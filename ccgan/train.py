@@ -59,6 +59,7 @@ from ccgan.trainer import (  # noqa: F401
     make_trainer,
     resolved_feedback_impl,
 )
+from mjx_arm.atomic import write_atomically
 from tracking.config import ConfigError  # noqa: F401  (kept importable as ccgan.train.ConfigError)
 
 
@@ -307,22 +308,35 @@ def load_npz(*paths: str | os.PathLike):
     return d.pressures_bar, d.poses, d.bounds
 
 
-def train_forward_models(fconf: ForwardConfig, data: TranslationData, workdir: Path, progress=True):
+def train_forward_models(
+    fconf: ForwardConfig, data: TranslationData, workdir: Path, progress=True, resume=False
+):
     """Trains F_s and F_c, writes `forward_{s,c}.ckpt` and `forward_metrics.json` to workdir.
 
     F_s is not used by the CCGAN; it is trained for the report, as in the paper. The bar
-    advances per epoch (minutes per model on a CPU at the default 300 epochs).
+    advances per epoch (minutes per model on a CPU at the default 300 epochs). Each model's
+    checkpoint and metrics are written as soon as it is trained, so with `resume` a run stopped
+    during F_c (a time limit, `experiments.paper`'s deadline) keeps F_s: a model whose checkpoint
+    was trained with these settings on this data, and whose metrics are in the file, is not
+    trained again.
     """
     from tqdm.auto import tqdm
 
     from ccgan import forward as forward_lib
 
     f_meta = {"config": dataclasses.asdict(fconf), "data": data_fingerprint(data)}
-    report = {}
-    models = (("forward_s", data.source), ("forward_c", data.constrained))
+    metrics_path = workdir / "forward_metrics.json"
+    report = _finished_forward_models(workdir, metrics_path, f_meta) if resume else {}
+    models = [
+        (name, split)
+        for name, split in (("forward_s", data.source), ("forward_c", data.constrained))
+        if name not in report
+    ]
     bar = tqdm(
         total=len(models) * fconf.epochs, desc="forward models", unit="epoch", disable=not progress
     )
+    for name in report:
+        bar.write(f"{name}: trained already with these settings ({workdir / f'{name}.ckpt'})")
     for name, split in models:
         bar.set_postfix_str(name)
         params, hist, metrics = forward_lib.train_forward(
@@ -330,10 +344,27 @@ def train_forward_models(fconf: ForwardConfig, data: TranslationData, workdir: P
         )
         checkpoint.save(workdir / f"{name}.ckpt", params, f_meta)
         report[name] = metrics | {"final_loss": float(hist[-1])}
+        write_atomically(metrics_path, lambda f: f.write(json.dumps(report, indent=2).encode()))
         bar.write(f"{name} {json.dumps(report[name])}")
     bar.close()
-    (workdir / "forward_metrics.json").write_text(json.dumps(report, indent=2))
     return report
+
+
+def _finished_forward_models(workdir: Path, metrics_path: Path, f_meta: dict) -> dict:
+    """{name: metrics} of the forward models in workdir that a resumed run can keep."""
+    try:
+        stored = json.loads(metrics_path.read_text())
+    except (OSError, ValueError):
+        return {}
+    done = {}
+    for name in ("forward_s", "forward_c"):
+        try:
+            checkpoint.load(workdir / f"{name}.ckpt", expect=f_meta)
+        except checkpoint.CheckpointError:  # absent, corrupt or made otherwise: trained again
+            continue
+        if isinstance(stored, dict) and name in stored:
+            done[name] = stored[name]
+    return done
 
 
 FORWARD_FILES = ("forward_s.ckpt", "forward_c.ckpt", "forward_metrics.json")
@@ -429,8 +460,10 @@ def main(argv=None) -> None:
     fc_path = workdir / "forward_c.ckpt"
     if args.forward_from is not None:
         copy_forward_models(parser, Path(args.forward_from), workdir, f_meta)
-    elif args.no_resume or not fc_path.exists():
-        train_forward_models(fconf, data, workdir, progress=not args.no_progress)
+    elif args.no_resume or not all((workdir / name).exists() for name in FORWARD_FILES):
+        train_forward_models(
+            fconf, data, workdir, progress=not args.no_progress, resume=not args.no_resume
+        )
     fc_params, _ = checkpoint.load(fc_path, expect=f_meta)
     if args.forward_only:
         return

@@ -7,6 +7,7 @@ simulation); the arm is the 3-segment test arm, loaded only for its model hash.
 
 import argparse
 import dataclasses
+import json
 import signal
 
 import jax
@@ -348,6 +349,45 @@ def test_forward_training_shows_progress(tmp_path, capsys):
     err = capsys.readouterr().err
     assert "forward models" in err and "4/4" in err and "epoch" in err  # 2 models x 2 epochs
     assert set(report) == {"forward_s", "forward_c"} and (tmp_path / "forward_c.ckpt").exists()
+
+
+def test_forward_training_stopped_during_f_c_keeps_f_s(tmp_path, monkeypatch):
+    """A run stopped while F_c trains (a deadline) keeps F_s: the resumed run trains F_c only;
+    other settings train both again."""
+    rng = np.random.default_rng(1)
+    arrays = []
+    for _ in range(2):
+        p = random_held_programs(rng, 3, 10)
+        arrays += [p, np.cumsum(rng.normal(scale=0.01, size=(3, 10, 6)), axis=1)]
+    data = data_lib.prepare(*arrays, window_length=5, n_val=1)
+    fconf = forward_lib.ForwardConfig(epochs=2, batch_size=2, hidden=4, fc=4)
+    real_train, trained = forward_lib.train_forward, []
+
+    def train_then_stop_at_f_c(config, split, *args, **kwargs):
+        if split is data.constrained and not trained:
+            raise KeyboardInterrupt  # the stop, while F_c trains
+        return real_train(config, split, *args, **kwargs)
+
+    monkeypatch.setattr(forward_lib, "train_forward", train_then_stop_at_f_c)
+    with pytest.raises(KeyboardInterrupt):
+        train_lib.train_forward_models(fconf, data, tmp_path, progress=False)
+    f_s = (tmp_path / "forward_s.ckpt").read_bytes()
+    assert not (tmp_path / "forward_c.ckpt").exists()
+    assert set(json.loads((tmp_path / "forward_metrics.json").read_text())) == {"forward_s"}
+
+    def counting(config, split, *args, **kwargs):
+        trained.append("forward_s" if split is data.source else "forward_c")
+        return real_train(config, split, *args, **kwargs)
+
+    monkeypatch.setattr(forward_lib, "train_forward", counting)
+    report = train_lib.train_forward_models(fconf, data, tmp_path, progress=False, resume=True)
+    assert trained == ["forward_c"] and (tmp_path / "forward_s.ckpt").read_bytes() == f_s
+    assert set(report) == set(json.loads((tmp_path / "forward_metrics.json").read_text()))
+    assert set(report) == {"forward_s", "forward_c"}
+    trained.clear()
+    other = dataclasses.replace(fconf, epochs=3)
+    train_lib.train_forward_models(other, data, tmp_path, progress=False, resume=True)
+    assert trained == ["forward_s", "forward_c"]
 
 
 # ----------------------------------------------------------------------------- translator
