@@ -336,15 +336,20 @@ def test_every_option_has_help_and_a_shown_default(module):
 # ----------------------------------------------------------------------------- progress
 
 
-def test_forward_training_shows_progress(tmp_path, capsys):
-    """F_s and F_c train for minutes at the default settings: a bar says where it stands."""
-    rng = np.random.default_rng(0)
+def _tiny_forward_setup(seed: int):
+    """(data of 3 random 10-step programs per domain, a 2-epoch ForwardConfig of width 4)."""
+    rng = np.random.default_rng(seed)
     arrays = []
     for _ in range(2):
         p = random_held_programs(rng, 3, 10)
         arrays += [p, np.cumsum(rng.normal(scale=0.01, size=(3, 10, 6)), axis=1)]
     data = data_lib.prepare(*arrays, window_length=5, n_val=1)
-    fconf = forward_lib.ForwardConfig(epochs=2, batch_size=2, hidden=4, fc=4)
+    return data, forward_lib.ForwardConfig(epochs=2, batch_size=2, hidden=4, fc=4)
+
+
+def test_forward_training_shows_progress(tmp_path, capsys):
+    """F_s and F_c train for minutes at the default settings: a bar says where it stands."""
+    data, fconf = _tiny_forward_setup(seed=0)
     report = train_lib.train_forward_models(fconf, data, tmp_path, progress=True)
     err = capsys.readouterr().err
     assert "forward models" in err and "4/4" in err and "epoch" in err  # 2 models x 2 epochs
@@ -354,13 +359,7 @@ def test_forward_training_shows_progress(tmp_path, capsys):
 def test_forward_training_stopped_during_f_c_keeps_f_s(tmp_path, monkeypatch):
     """A run stopped while F_c trains (a deadline) keeps F_s: the resumed run trains F_c only;
     other settings train both again."""
-    rng = np.random.default_rng(1)
-    arrays = []
-    for _ in range(2):
-        p = random_held_programs(rng, 3, 10)
-        arrays += [p, np.cumsum(rng.normal(scale=0.01, size=(3, 10, 6)), axis=1)]
-    data = data_lib.prepare(*arrays, window_length=5, n_val=1)
-    fconf = forward_lib.ForwardConfig(epochs=2, batch_size=2, hidden=4, fc=4)
+    data, fconf = _tiny_forward_setup(seed=1)
     real_train, trained = forward_lib.train_forward, []
 
     def train_then_stop_at_f_c(config, split, *args, **kwargs):
