@@ -2,10 +2,14 @@
 
 from __future__ import annotations
 
+import hashlib
 import importlib
 import json
 import os
 import shlex
+import shutil
+import subprocess
+import tarfile
 import textwrap
 import time
 
@@ -350,3 +354,44 @@ def test_quick_chain_runs_end_to_end_then_skips_everything(tmp_path, capsys):
     capsys.readouterr()
     assert paper.main(argv) == 0
     assert capsys.readouterr().out.count("skipped") == len(stages)
+
+
+def test_take_state_keeps_a_second_runs_state_apart_and_refuses_a_bad_join(tmp_path):
+    """experiments/take_state.sh joins a device call's pieces into STATE_DIR only, leaving the
+    first run's state as it was; pieces that do not match their sha256 change nothing."""
+    repo = tmp_path / "repo"
+    (repo / "experiments").mkdir(parents=True)
+    script = repo / "experiments" / "take_state.sh"
+    shutil.copy(paper.REPO / "experiments" / "take_state.sh", script)
+    first = repo / ".paper_state" / "paper_state.tar.gz"
+    first.parent.mkdir()
+    first.write_bytes(b"the first run")
+    (tmp_path / "paper").mkdir()
+    (tmp_path / "paper" / "stage.json").write_text("{}")
+    whole = tmp_path / "paper_state.tar.gz"
+    with tarfile.open(whole, "w:gz") as tar:
+        tar.add(tmp_path / "paper", arcname="paper")
+    blob = whole.read_bytes()
+    files_at = tmp_path / "files"
+    files_at.mkdir()
+    half = len(blob) // 2
+    (files_at / "paper_state.tar.gz.part-00").write_bytes(blob[:half])
+    (files_at / "paper_state.tar.gz.part-01").write_bytes(blob[half:])
+    digest = hashlib.sha256(blob).hexdigest()
+    (files_at / "paper_state.sha256").write_text(f"{digest}  paper_state.tar.gz\n")
+    env = os.environ | {"STATE_DIR": ".paper_state_rerun"}
+
+    def take(*args):
+        return subprocess.run(
+            ["bash", str(script), str(files_at), *args], env=env, capture_output=True, text=True
+        )
+
+    done = take(str(tmp_path / "unpacked"))
+    assert done.returncode == 0, done.stderr
+    assert (repo / ".paper_state_rerun" / "paper_state.tar.gz").read_bytes() == blob
+    assert (tmp_path / "unpacked" / "paper" / "stage.json").read_text() == "{}"
+    assert first.read_bytes() == b"the first run"
+    (files_at / "paper_state.tar.gz.part-01").write_bytes(blob[half:] + b"x")
+    bad = take()
+    assert bad.returncode == 1 and "does not match" in bad.stderr
+    assert (repo / ".paper_state_rerun" / "paper_state.tar.gz").read_bytes() == blob
