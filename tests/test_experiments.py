@@ -395,3 +395,32 @@ def test_take_state_keeps_a_second_runs_state_apart_and_refuses_a_bad_join(tmp_p
     bad = take()
     assert bad.returncode == 1 and "does not match" in bad.stderr
     assert (repo / ".paper_state_rerun" / "paper_state.tar.gz").read_bytes() == blob
+
+
+def test_compare_runs_names_equal_and_differing_outputs_and_each_seeds_held_out_number(
+    tmp_path, capsys
+):
+    """Two runs' manifests: outputs with the same sha256 are told from the rest, stage.log is left
+    out, and each seed's last held-out number is shown; a folder without stages is refused."""
+    from experiments import compare_runs
+
+    for run, (weights, errors) in {"a": ("w1", (7.5, 6.0)), "b": ("w2", (7.25, 9.0))}.items():
+        stage = tmp_path / run / "ccgan"
+        stage.mkdir(parents=True)
+        files = {"forward_c.ckpt": "f", "translator.ckpt": weights, "stage.log": run}
+        (stage / "stage.json").write_text(json.dumps({"files": files}))
+        rows = ["seed,epoch,val_error_cm", "0,1,99", "1,1,99"]
+        rows += [f"{s},2,{e}" for s, e in enumerate(errors)]
+        (stage / "metrics.csv").write_text("\n".join(rows) + "\n")
+    out = tmp_path / "comparison.md"
+    compare_runs.main([str(tmp_path / "a"), str(tmp_path / "b"), "--out", str(out)])
+    row = next(line for line in out.read_text().splitlines() if line.startswith("| ccgan"))
+    assert row == (
+        "| ccgan | forward_c.ckpt | translator.ckpt | val_error_cm at epoch 2 | 7.500 / 6.000"
+        " | 7.250 / 9.000 |"
+    )
+    assert capsys.readouterr().out == out.read_text()
+    (tmp_path / "empty").mkdir()
+    with pytest.raises(SystemExit):
+        compare_runs.main([str(tmp_path / "a"), str(tmp_path / "empty")])
+    assert "no stage folder" in capsys.readouterr().err
