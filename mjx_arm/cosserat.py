@@ -5,23 +5,32 @@ here from the equations: n + 1 nodes carry positions and velocities; n elements 
 (a rotation matrix whose rows are d1, d2, d3 in world components) and an angular velocity in
 their own frame. Each element has stretch and shear strain sigma = Q (x_{j+1} - x_j) / l0 - e3;
 each Voronoi point between two elements has bend and twist curvature kappa = log(Q_prev Q_next^T)
-/ D. Internal force n = S sigma and couple m = B kappa, with S = diag(a G A, a G A, E A) and
-B = diag(E I, E I, G J).
+/ D. With S = diag(a G A, a G A, E A) and B = diag(E I, E I, G J), the default law
+(`law="gazzola"`, the paper's simulator, PyElastica) divides by the local stretch, as an
+incompressible section thins and softens when it lengthens:
+
+  n = Q^T S (sigma - sigma0) / e,   m = B (kappa - kappa0) / e_v^3,
+
+with e = |x_{j+1} - x_j| / l0 per element and e_v the same ratio of each Voronoi domain; the
+rotational dynamics carry the matching terms (J / e is the stretched element's inertia, so
+d omega / dt = e J^-1 tau - J^-1 (omega x J omega) + omega de/dt / e). `law="linear"` is the
+earlier law without these factors (n = Q^T S (sigma - sigma0), m = B (kappa - kappa0)), kept for
+comparison: it is what the chain's constant joint springs follow at any stretch.
 
 Choices (each differs from PyElastica only where it says so):
   * The base is clamped by a fixed frame at the base node and a half-length Voronoi domain
     between it and the first element, so the first element bends too. (PyElastica freezes the
     first element, which moves the effective clamp half an element up and makes the cantilever
     error first order in 1 / n; this clamp keeps it second order.)
-  * Stiffnesses are not rescaled by the local dilatation (PyElastica divides by powers of the
-    stretch e): forces are linear in the strains, curvature is per rest length, the same law
-    the MuJoCo chain's linear joint springs follow at any stretch.
+  * Curvature is per rest length and the strains are linear in the positions, as PyElastica's.
   * Couples pass between neighbours as world vectors in the frame halfway between them, so
     internal couples cancel exactly (PyElastica adds kappa x B kappa for the same effect).
   * Each pressurised chamber adds an internal (active) resultant on the span it covers: an axial
     force -F d3 and a couple F (d3 x r) with r its offset, as the fluid in the lumen pushes the
-    distal end cap. A free rod then stretches by F / EA and bends with curvature F |r| / EI away
-    from the chamber, the same sign as the MuJoCo model.
+    distal end cap. It enters as rest strains, sigma0 = F / (E A) e3 and kappa0 = -F (d3 x r) /
+    B, so the stretch factors scale it with the elastic terms (PyElastica writes active loads
+    the same way). A free rod then stretches by F / EA and bends with curvature F |r| / EI away
+    from the chamber under either law, the same sign as the MuJoCo model.
   * Damping is PyElastica's analytical linear damper, as the paper code used it: after each
     step v <- v exp(-c dt) and omega <- omega exp(-c_rot dt m_e / J), unconditionally stable.
     It removes as much speed as a linear drag of rate (exp(c dt) - 1) / dt would
@@ -59,6 +68,11 @@ _ARM = ArmParams()
 #: Translational damping constants (1/s) of the paper's two domains [paper code]: per unit mass,
 #: so the medium's force per length is c times the mass per length.
 DOMAIN_DAMPING_PER_S = constants.PAPER_DAMPING_PER_S
+
+#: Constitutive laws: "gazzola" divides force by the stretch e and couple by e_v^3 (Gazzola et
+#: al. 2018, PyElastica, the paper's simulator); "linear" leaves those factors out (the earlier
+#: reference, and the law of the chain's constant joint springs).
+LAWS = ("gazzola", "linear")
 
 
 @dataclasses.dataclass(frozen=True)
@@ -113,6 +127,9 @@ class CosseratParams:
     """Static solves stop once every node and element-rim speed is below this (m/s)."""
     settle_max_s: float = 10.0
     """Upper limit on the simulated time of one static solve (s)."""
+    law: str = "gazzola"
+    """Constitutive law (`LAWS`): "gazzola" with the stretch factors [paper's simulator], or
+    "linear" without them [the earlier reference, kept for comparison]."""
 
     # ------------------------------------------------------------------ derived quantities
 
@@ -194,6 +211,8 @@ class CosseratParams:
         """Raises ValueError for parameters that cannot make a stable rod."""
         if self.n_elements < 2:
             raise ValueError(f"n_elements must be >= 2, got {self.n_elements}")
+        if self.law not in LAWS:
+            raise ValueError(f"unknown law {self.law!r}; known: {LAWS}")
         if not 0.0 < self.chamber_length_m <= self.length_m:
             raise ValueError("chamber_length_m must lie in (0, length_m]")
         if self.dt_s is not None:
@@ -267,6 +286,7 @@ class _Rod(NamedTuple):
     rot_damp: np.ndarray  # [n, 3] per-step factor on omega (dynamics)
     trans_damp: float  # per-step factor on v (dynamics)
     settle_damp: float  # per-step factor on v and omega (static solves)
+    stretch_factors: bool  # the "gazzola" law's 1 / e and 1 / e_v^3 (a static branch)
 
 
 #: Rest directors: d1 = +x, d2 = -y, d3 = -z.
@@ -319,6 +339,7 @@ def _make_rod(params: CosseratParams) -> _Rod:
         rot_damp=np.exp(-params.rotational_damping * dt * m_e / inertia),
         trans_damp=math.exp(-params.damping_per_s * dt),
         settle_damp=math.exp(-params.settle_rate_per_s * dt),
+        stretch_factors=params.law == "gazzola",
     )
 
 
@@ -333,6 +354,17 @@ def straight_state(params: CosseratParams) -> RodState:
 # ---------------------------------------------------------------------- physics
 
 
+def _dilatations(rod: _Rod, edges: jnp.ndarray) -> tuple[jnp.ndarray, jnp.ndarray]:
+    """Stretch e [n] of each element and e_v [n] of each Voronoi domain (-).
+
+    The base half-domain (clamp to the first element's centre) takes the first element's e;
+    each interior domain spans half of each neighbour, so e_v = (l_{j-1} + l_j) / (2 l0).
+    """
+    e = jnp.linalg.norm(edges, axis=-1) / rod.rest_length
+    e_voronoi = jnp.concatenate([e[:1], 0.5 * (e[:-1] + e[1:])])
+    return e, e_voronoi
+
+
 def _loads(
     rod: _Rod,
     x: jnp.ndarray,
@@ -340,21 +372,27 @@ def _loads(
     pressure_bar: jnp.ndarray,
     tip_force_n: jnp.ndarray,
     tip_couple_nm: jnp.ndarray,
-) -> tuple[jnp.ndarray, jnp.ndarray]:
-    """Node forces [n + 1, 3] (N, world) and element torques [n, 3] (N m, element frame)."""
+) -> tuple[jnp.ndarray, jnp.ndarray, jnp.ndarray]:
+    """Node forces [n + 1, 3] (N, world), element torques [n, 3] (N m, element frame) and the
+    element stretches e [n] (-, ones under the linear law)."""
     e3 = jnp.array([0.0, 0.0, 1.0], dtype=x.dtype)
     chamber_force = pressure_bar * rod.force_per_bar  # [3] (N)
 
     edges = x[1:] - x[:-1]
+    if rod.stretch_factors:
+        stretch, stretch_voronoi = _dilatations(rod, edges)
+    else:
+        stretch = stretch_voronoi = jnp.ones(edges.shape[0], x.dtype)
     sigma = jnp.einsum("nij,nj->ni", q, edges) / rod.rest_length - e3
     n_local = sigma * rod.shear_diag - (chamber_force.sum() * rod.chamber_elem)[:, None] * e3
+    n_local = n_local / stretch[:, None]
     n_world = jnp.einsum("nji,nj->ni", q, n_local)
 
     q_prev = jnp.concatenate([jnp.asarray(rod.clamp, x.dtype)[None], q[:-1]], axis=0)
     theta = rotations.log_so3(q_prev @ jnp.swapaxes(q, -1, -2))  # [n, 3] in the frame of q_prev
     kappa = theta / rod.voronoi_length[:, None]
     active = rod.chamber_voronoi[:, None] * (chamber_force @ rod.chamber_couple_dir)[None]
-    m_local = kappa * rod.bend_diag + active
+    m_local = (kappa * rod.bend_diag + active) / stretch_voronoi[:, None] ** 3
     m_mid = jnp.einsum("nij,nj->ni", rotations.exp_so3(0.5 * theta), m_local)
     m_world = jnp.einsum("nji,nj->ni", q_prev, m_mid)
 
@@ -365,7 +403,7 @@ def _loads(
 
     torque_world = jnp.concatenate([m_world[1:], zero]) - m_world + jnp.cross(edges, n_world)
     torque_world = torque_world.at[-1].add(tip_couple_nm)
-    return forces, jnp.einsum("nij,nj->ni", q, torque_world)
+    return forces, jnp.einsum("nij,nj->ni", q, torque_world), stretch
 
 
 def _step(
@@ -377,15 +415,26 @@ def _step(
     trans_damp,
     rot_damp,
 ) -> RodState:
-    """One position-Verlet step: half drift, kick with damping, half drift; base node fixed."""
+    """One position-Verlet step: half drift, kick with damping, half drift; base node fixed.
+
+    Under the "gazzola" law an element stretched by e has the rotational inertia J / e of its
+    thinner section, and a stretching element slows its spin as its inertia changes:
+    d omega / dt = (e tau - omega x J omega) / J + omega (de/dt) / e.
+    """
     h = 0.5 * rod.dt
     x = (state.x + h * state.v).at[0].set(0.0)
     q = rotations.exp_so3(-h * state.w) @ state.q
-    forces, torques = _loads(rod, x, q, pressure_bar, tip_force_n, tip_couple_nm)
+    forces, torques, stretch = _loads(rod, x, q, pressure_bar, tip_force_n, tip_couple_nm)
+    w = state.w
+    spin = (torques * stretch[:, None] - jnp.cross(w, rod.inertia * w)) / rod.inertia
+    if rod.stretch_factors:
+        edges = x[1:] - x[:-1]
+        tangents = edges / jnp.linalg.norm(edges, axis=-1, keepdims=True)
+        stretch_rate = jnp.sum(tangents * (state.v[1:] - state.v[:-1]), -1) / rod.rest_length
+        spin = spin + w * (stretch_rate / stretch)[:, None]
     v = state.v + rod.dt * forces / rod.node_mass[:, None]
     v = (v * trans_damp).at[0].set(0.0)
-    w = state.w
-    w = w + rod.dt * (torques - jnp.cross(w, rod.inertia * w)) / rod.inertia
+    w = w + rod.dt * spin
     w = w * rot_damp
     x = (x + h * v).at[0].set(0.0)
     q = rotations.exp_so3(-h * w) @ q
