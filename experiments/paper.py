@@ -19,12 +19,21 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import signal
 import sys
 from pathlib import Path
 
 from experiments import report
-from experiments.stages import Chain, DeadlineReached, StageError, load_config, run_stages
+from experiments.stages import (
+    Chain,
+    DeadlineReached,
+    StageError,
+    has_manifest,
+    load_config,
+    run_stages,
+)
+from mjx_arm.run_folder import FolderBusyError, check_writable_folder, lock_folder
 
 REPO = Path(__file__).resolve().parent.parent
 DEFAULT_CONFIG = REPO / "experiments" / "paper.json"
@@ -68,8 +77,8 @@ def build_parser() -> argparse.ArgumentParser:
         "--deadline-s",
         type=float,
         default=None,
-        help="stop the running stage after this many seconds of the whole run (exit status 3;"
-        " its folder stays and the same command continues it)",
+        help="stop the running stage after this many seconds of the whole run (a positive, finite"
+        " number; exit status 3; its folder stays and the same command continues it)",
     )
     return parser
 
@@ -89,7 +98,7 @@ def list_stages(chain: Chain) -> None:
             wall_s = sum(a["wall_s"] or 0.0 for a in attempts)
             status += f" ({len(attempts)} attempt(s), {wall_s:.0f} s so far)"
         if status.startswith(("todo", "partial")):
-            waiting = [n for n in chain.stages[name].inputs if chain.manifest(n) is None]
+            waiting = [n for n in chain.stages[name].inputs if not has_manifest(chain, n)]
             if waiting:
                 status += f" (waits for {', '.join(waiting)})"
         print(f"{name:14s} {status}")
@@ -107,15 +116,31 @@ def main(argv=None) -> int:
     unknown = [n for n in (args.stage or []) + args.redo if n not in chain.stages]
     if unknown:
         parser.error(f"unknown stage(s) {unknown}; the config has {list(chain.stages)}")
-    if args.deadline_s is not None and args.deadline_s <= 0:
-        parser.error("--deadline-s must be positive")
+    if args.deadline_s is not None and not (math.isfinite(args.deadline_s) and args.deadline_s > 0):
+        parser.error(
+            f"--deadline-s must be a positive number of seconds, got {args.deadline_s}"
+            " (leave it out for no deadline)"
+        )
     if args.jobs < 1:
         parser.error("--jobs must be at least 1")
+    if args.out.exists() and not args.out.is_dir():
+        parser.error(f"--out {args.out} exists and is not a folder")
     if args.list:
         list_stages(chain)
         return 0
+    try:
+        check_writable_folder(args.out)
+        lock = lock_folder(args.out)  # one chain per run folder
+    except (OSError, FolderBusyError) as err:
+        parser.error(f"--out: {err}")
+    with lock:
+        return run(chain, config, args)
+
+
+def run(chain: Chain, config: dict, args: argparse.Namespace) -> int:
+    """Runs the selected stages of a checked command line; writes paper.md when every stage is
+    done; returns the exit status."""
     signal.signal(signal.SIGTERM, lambda *_: sys.exit(128 + signal.SIGTERM))
-    args.out.mkdir(parents=True, exist_ok=True)
     selected = args.stage or list(chain.stages)
     try:
         run_stages(
@@ -132,10 +157,20 @@ def main(argv=None) -> int:
     except StageError as err:
         print(f"error: {err}", file=sys.stderr)
         return 1
-    if all(chain.manifest(n) is not None for n in chain.stages):
+    not_done = [n for n in chain.stages if _status(chain, n) != "done"]
+    if not not_done:
         path = report.write(chain, config, args.config)
         print(f"report: {path}")
+    else:
+        print(f"paper.md is written once every stage is done and current; not yet: {not_done}")
     return 0
+
+
+def _status(chain: Chain, name: str) -> str:
+    try:
+        return chain.status(name)
+    except StageError as err:
+        return f"broken ({err})"
 
 
 if __name__ == "__main__":

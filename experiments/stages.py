@@ -17,6 +17,7 @@ it. Wall times add up over the attempts.
 
 from __future__ import annotations
 
+import ctypes
 import dataclasses
 import datetime
 import functools
@@ -25,6 +26,7 @@ import json
 import os
 import re
 import shlex
+import signal
 import subprocess
 import sys
 import time
@@ -183,13 +185,28 @@ class Chain:
         return self.out / (name + ".log")
 
     def manifest(self, name: str) -> dict | None:
+        """A finished stage's `stage.json`, None when there is none.
+
+        Raises:
+          StageError: it is not JSON, or lacks what this chain writes there (the message names
+            the file and how to rerun the stage).
+        """
         path = self.folder(name) / MANIFEST
         if not path.exists():
             return None
         try:
-            return json.loads(path.read_text())
-        except json.JSONDecodeError as err:
-            raise StageError(f"{path} is corrupt: {err}") from err
+            manifest = json.loads(path.read_text())
+        except (OSError, UnicodeDecodeError, json.JSONDecodeError) as err:
+            raise StageError(f"{path} is corrupt ({err}): give --redo {name}") from err
+        kinds = {"key": dict, "files": dict, "attempts": list, "wall_s": (int, float)}
+        fields = manifest if isinstance(manifest, dict) else {}
+        bad = [k for k, kind in kinds.items() if not isinstance(fields.get(k), kind)]
+        if bad:
+            raise StageError(
+                f"{path} lacks {', '.join(repr(k) for k in bad)} (not a manifest this chain"
+                f" wrote): give --redo {name}"
+            )
+        return manifest
 
     def outputs_digest(self, name: str) -> str:
         """The digest of a finished stage's files, as its manifest records them."""
@@ -321,6 +338,10 @@ class Attempt:
             env=env,
             stdout=self.log_file,
             stderr=subprocess.STDOUT if self.log_file else None,
+            # Its own session: a terminal's Ctrl-C reaches the chain only, which stops the
+            # command as at the deadline; and it dies with the chain, even a killed one.
+            start_new_session=True,
+            preexec_fn=die_with_parent(),
         )
 
     def _write(self) -> None:
@@ -341,6 +362,32 @@ class Attempt:
     def stop(self) -> None:
         """SIGTERM, then SIGKILL after `STOP_GRACE_S`: a training command writes its checkpoint."""
         stop_all([self])
+
+
+PR_SET_PDEATHSIG = 1  # prctl(2): the signal a process gets when its parent dies
+
+
+def die_with_parent(sig: int = signal.SIGTERM):
+    """A `subprocess.Popen` preexec_fn by which the child gets `sig` when this process dies,
+    however it dies (`kill -9` included); None where Linux's prctl is missing.
+
+    SIGTERM, as at the deadline: a training ends its epoch and checkpoints (its run folder's
+    lock keeps a second trainer out meanwhile); a command without a handler ends at once.
+    """
+    if not sys.platform.startswith("linux"):
+        return None
+    try:
+        prctl = ctypes.CDLL(None, use_errno=True).prctl  # looked up here: not after the fork
+    except (OSError, AttributeError):
+        return None
+    parent = os.getpid()
+
+    def preexec() -> None:
+        prctl(PR_SET_PDEATHSIG, sig)
+        if os.getppid() != parent:  # the parent died before prctl took effect
+            os.kill(os.getpid(), sig)
+
+    return preexec
 
 
 def stop_all(attempts: list[Attempt]) -> None:
@@ -367,7 +414,12 @@ def _begin(chain: Chain, name: str, redo: bool, log) -> tuple[dict, list[dict]] 
         `redo`).
     """
     stage = chain.stages[name]
-    status = chain.status(name)
+    try:
+        status = chain.status(name)
+    except StageError:
+        if not redo:
+            raise
+        status = "broken"  # changed files or an unreadable manifest: rerun, old folder kept aside
     if status == "done" and not redo:
         log(f"[{name}] done: skipped (outputs match their inputs)")
         return None
@@ -495,10 +547,7 @@ def run_stages(
     """
     if jobs < 1:
         raise ValueError(f"jobs must be at least 1, got {jobs}")
-    for name in names:
-        missing = [n for n in chain.stages[name].inputs if n not in names and not chain.manifest(n)]
-        if missing:
-            raise StageError(f"stage {name} reads {missing}, which have not finished: run them too")
+    check_before_running(chain, names, redo)
     if jobs == 1 and not devices:
         start = time.monotonic()
         for i, name in enumerate(names):
@@ -510,6 +559,78 @@ def run_stages(
         return
     scheduler = _Scheduler(chain, names, jobs, redo, log, _child_env(jobs), devices)
     scheduler.run(deadline_s, poll_s, status_every_s)
+
+
+def upstream(chain: Chain, names) -> list[str]:
+    """Every stage that the named ones read, directly or through other stages, in chain order."""
+    needed, todo = set(), list(names)
+    while todo:
+        for name in chain.stages[todo.pop()].inputs:
+            if name not in needed:
+                needed.add(name)
+                todo.append(name)
+    return [n for n in chain.stages if n in needed]
+
+
+def has_manifest(chain: Chain, name: str) -> bool:
+    """Whether a stage's folder holds a readable manifest (whether or not it is current)."""
+    try:
+        return chain.manifest(name) is not None
+    except StageError:
+        return False
+
+
+def _not_current(chain: Chain, name: str) -> str | None:
+    """Why a stage with a manifest cannot be used as it is (None: it can): what a plain run
+    would refuse when it came to it."""
+    try:
+        status = chain.status(name)
+    except StageError as err:
+        return str(err)
+    if status == "stale":
+        return "made from other inputs (the config or an upstream stage's outputs changed)"
+    return None
+
+
+def check_before_running(chain: Chain, names, redo=()) -> None:
+    """Refuses, before any work, what a plain run would refuse on its way: every stage that the
+    named ones read, directly or not, and that is not named itself must be finished, current
+    (its key matches the config and its inputs' outputs) and whole (its files match its
+    manifest); a named stage that has finished must be current and whole unless it is in
+    `redo`.
+
+    Raises:
+      StageError: naming each such stage, why, and the `--redo` that reruns it.
+    """
+    names = list(names)
+    for name in names:
+        missing = [n for n in chain.stages[name].inputs if n not in names and not chain.manifest(n)]
+        if missing:
+            raise StageError(f"stage {name} reads {missing}, which have not finished: run them too")
+    problems = []
+    for name in upstream(chain, names):
+        if name not in names:
+            why = _not_current(chain, name)
+            if why is not None:
+                readers = [n for n in names if name in upstream(chain, [n])]
+                problems.append((name, f"{why}; {', '.join(readers)} read(s) it"))
+    for name in names:
+        inputs_done = all(
+            n not in redo and has_manifest(chain, n) for n in chain.stages[name].inputs
+        )
+        if name in redo or not has_manifest(chain, name) or not inputs_done:
+            continue  # run afresh, or checked when its inputs are done
+        why = _not_current(chain, name)
+        if why is not None:
+            problems.append((name, why))
+    if problems:
+        redo_names = " ".join(n for n, _ in problems)
+        raise StageError(
+            "not current, nothing run: "
+            + "; ".join(f"stage {n}: {why}" for n, why in problems)
+            + f". Rerun with --redo {redo_names} (with --stage, name them there too), or look"
+            " at --list"
+        )
 
 
 class _Scheduler:

@@ -39,6 +39,8 @@ FAKE_STAGE = textwrap.dedent(
     if "--fail-once" in args and not (out / "tried").exists():
         (out / "tried").write_text("1")
         sys.exit(5)
+    if opt("--pid-file"):
+        pathlib.Path(opt("--pid-file")).write_text(str(os.getpid()))
     if opt("--sleep"):
         time.sleep(float(opt("--sleep")))
     upstream = pathlib.Path(opt("--in"), "out.txt").read_text() if opt("--in") else ""
@@ -424,3 +426,180 @@ def test_compare_runs_names_equal_and_differing_outputs_and_each_seeds_held_out_
     with pytest.raises(SystemExit):
         compare_runs.main([str(tmp_path / "a"), str(tmp_path / "empty")])
     assert "no stage folder" in capsys.readouterr().err
+
+
+def paper_like(tmp_path, data_text="d"):
+    """(argv of experiments.paper, Chain) for a fake chain shaped as the paper's: data ->
+    forward -> ccgan and wcgan -> table (which reads both translators)."""
+    stages = [
+        ("data", f"--text {data_text}"),
+        ("forward", "--text f --in {stage:data}"),
+        ("ccgan", "--text c --in {stage:forward}"),
+        ("wcgan", "--text w --in {stage:forward}"),
+        ("table", "--text t --in {stage:ccgan} --also {stage:wcgan}"),
+    ]
+    config = {
+        "stages": [
+            {"name": n, "module": "fakestage", "args": f"{a} --out {{dir}}"} for n, a in stages
+        ]
+    }
+    path = tmp_path / "chain.json"
+    path.write_text(json.dumps(config))
+    _, loaded = load_config(path)
+    out = tmp_path / "run"
+    return ["--out", str(out), "--config", str(path)], Chain(loaded, out, tmp_path)
+
+
+def test_stage_after_a_config_edit_and_an_upstream_redo_is_refused(fake, capsys):
+    """Issue 32, case 1: the config's first stage edited, then --redo of that stage alone: the
+    stages after it are stale, so --stage table refuses (naming them and --redo) instead of
+    skipping the table and rewriting paper.md under the edited config."""
+    argv, chain = paper_like(fake)
+    assert paper.main(argv) == 0
+    report_before = (chain.out / "paper.md").read_text()
+    table_before = chain.manifest("table")
+    argv, chain = paper_like(fake, data_text="edited")
+    assert paper.main([*argv, "--stage", "data", "--redo", "data"]) == 0
+    capsys.readouterr()
+    assert paper.main([*argv, "--stage", "table"]) == 1
+    err = capsys.readouterr().err
+    assert "stage forward: made from other inputs" in err and "--redo forward" in err
+    assert (chain.out / "paper.md").read_text() == report_before  # not rewritten
+    assert chain.manifest("table") == table_before
+    # A plain run refuses the same stage.
+    assert paper.main(argv) == 1
+    assert "stage forward: made from other inputs" in capsys.readouterr().err
+
+
+def test_stage_refuses_an_input_whose_files_were_replaced_and_redo_reruns_it(fake, capsys):
+    """Issue 32, case 1: ccgan's translator replaced by wcgan's: --stage table (with or without
+    --redo table) refuses before any work, naming ccgan and --redo; --redo ccgan reruns it."""
+    argv, chain = paper_like(fake)
+    assert paper.main(argv) == 0
+    shutil.copy(chain.folder("wcgan") / "out.txt", chain.folder("ccgan") / "out.txt")
+    for extra in ([], ["--redo", "table"]):
+        capsys.readouterr()
+        assert paper.main([*argv, "--stage", "table", *extra]) == 1
+        err = capsys.readouterr().err
+        assert "stage ccgan:" in err and "differ from its manifest" in err
+        assert "--redo ccgan" in err
+        assert not list(chain.out.glob("table.replaced-*"))
+    assert paper.main([*argv, "--stage", "ccgan", "table", "--redo", "ccgan", "table"]) == 0
+    assert (chain.folder("ccgan") / "out.txt").read_text() == "cfd"
+    assert (chain.folder("table") / "out.txt").read_text() == "tcfd"
+    assert len(list(chain.out.glob("ccgan.replaced-*"))) == 1
+
+
+def test_a_manifest_without_files_is_an_error_naming_it(fake, capsys):
+    argv, chain = paper_like(fake)
+    assert paper.main([*argv, "--stage", "data"]) == 0
+    path = chain.folder("data") / "stage.json"
+    manifest = json.loads(path.read_text())
+    del manifest["files"]
+    path.write_text(json.dumps(manifest))
+    capsys.readouterr()
+    assert paper.main(argv) == 1
+    err = capsys.readouterr().err
+    assert f"{path} lacks 'files'" in err and "--redo data" in err
+    assert paper.main([*argv, "--redo", "data"]) == 0
+
+
+@pytest.mark.parametrize("deadline", ["nan", "inf", "-1", "0"])
+def test_a_meaningless_deadline_is_a_usage_error(fake, capsys, deadline):
+    argv, chain = paper_like(fake)
+    with pytest.raises(SystemExit) as exit_:
+        paper.main([*argv, "--deadline-s", deadline])
+    assert exit_.value.code == 2
+    assert "--deadline-s must be a positive number" in capsys.readouterr().err
+    assert not chain.out.exists()
+
+
+def test_an_out_that_is_a_file_or_not_writable_is_a_usage_error(fake, capsys):
+    argv, chain = paper_like(fake)
+    (fake / "file").write_text("x")
+    for out in (fake / "file", fake / "file" / "run"):
+        with pytest.raises(SystemExit) as exit_:
+            paper.main([*argv, "--out", str(out)])
+        assert exit_.value.code == 2
+        assert "is not a folder" in capsys.readouterr().err
+    if os.geteuid() == 0:
+        return  # root writes into a read-only folder: nothing to refuse
+    locked = fake / "read_only"
+    locked.mkdir(mode=0o555)
+    with pytest.raises(SystemExit):
+        paper.main([*argv, "--out", str(locked / "run")])
+    assert f"cannot write in {locked}" in capsys.readouterr().err
+
+
+def _running(pid: int) -> bool:
+    """Whether a process runs (a zombie waiting for its reaper does not)."""
+    try:
+        with open(f"/proc/{pid}/stat") as f:
+            return f.read().rsplit(")", 1)[1].split()[0] not in "ZX"
+    except FileNotFoundError:
+        return False
+
+
+def test_a_second_chain_on_one_folder_is_refused_at_once(fake, capsys):
+    """One owner per run folder: while one chain runs, another on the same --out is refused
+    with the folder and the holder's pid, and leaves nothing there."""
+    argv, chain = paper_like(fake)
+    pid_file = fake / "child.pid"
+    config = json.loads((fake / "chain.json").read_text())
+    config["stages"][0]["args"] = f"--text d --sleep 60 --pid-file {pid_file} --out {{dir}}"
+    (fake / "chain.json").write_text(json.dumps(config))
+    first = subprocess.Popen(
+        [paper.sys.executable, "-m", "experiments.paper", *argv], cwd=paper.REPO
+    )
+    try:
+        for _ in range(600):
+            if pid_file.exists() and pid_file.read_text():
+                break
+            time.sleep(0.05)
+        before = sorted(p.name for p in chain.out.iterdir())
+        start = time.monotonic()
+        with pytest.raises(SystemExit) as exit_:
+            paper.main(argv)
+        assert exit_.value.code == 2 and time.monotonic() - start < 5
+        assert f"{chain.out} is in use by process {first.pid}" in capsys.readouterr().err
+        assert sorted(p.name for p in chain.out.iterdir()) == before
+    finally:
+        first.kill()
+        first.wait()
+        child = int(pid_file.read_text())
+        for _ in range(100):
+            if not _running(child):
+                break
+            time.sleep(0.05)
+        if _running(child):
+            os.kill(child, 9)
+
+
+def test_a_killed_chain_takes_its_command_with_it(fake):
+    """kill -9 of the chain: its running command gets SIGTERM (as at the deadline) and ends,
+    instead of writing on into the run folder beside the next chain."""
+    argv, chain = paper_like(fake)
+    pid_file = fake / "child.pid"
+    config = json.loads((fake / "chain.json").read_text())
+    config["stages"][0]["args"] = f"--text d --sleep 60 --pid-file {pid_file} --out {{dir}}"
+    (fake / "chain.json").write_text(json.dumps(config))
+    parent = subprocess.Popen(
+        [paper.sys.executable, "-m", "experiments.paper", *argv], cwd=paper.REPO
+    )
+    for _ in range(600):
+        if pid_file.exists() and pid_file.read_text():
+            break
+        time.sleep(0.05)
+    child = int(pid_file.read_text())
+    assert _running(child)
+    parent.kill()
+    parent.wait()
+    try:
+        for _ in range(100):
+            if not _running(child):
+                break
+            time.sleep(0.05)
+        assert not _running(child), "the chain's command outlived it"
+    finally:
+        if _running(child):
+            os.kill(child, 9)
