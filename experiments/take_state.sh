@@ -7,9 +7,16 @@
 #
 #   bash experiments/take_state.sh FILES_AT          # FILES_AT: the folder the call's files lie in
 #   bash experiments/take_state.sh FILES_AT runs/    # and unpack the run folder into runs/paper
+# It never unpacks over a run folder: with UNPACK_DIR/paper already there it refuses before
+# doing anything (move that folder away, or name another UNPACK_DIR).
 set -euo pipefail
 from=$(cd "${1:?usage: take_state.sh FILES_AT [UNPACK_DIR]}" && pwd)
 root=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
+if [[ -n ${2:-} && ( -e $2/paper || -L $2/paper ) ]]; then
+  echo "$2/paper exists: take_state.sh does not unpack over a run folder; nothing was changed." \
+    "Move it away or name another UNPACK_DIR" >&2
+  exit 1
+fi
 compgen -G "$from/paper_state.tar.gz.part-*" >/dev/null || {
   echo "no paper_state.tar.gz.part-* in $from" >&2
   exit 1
@@ -26,7 +33,13 @@ mkdir -p "$state_dir"
 mv -f "$tmp/paper_state.tar.gz" "$state_dir/paper_state.tar.gz"
 echo "kept $(du -h "$state_dir/paper_state.tar.gz" | cut -f1) in $state_dir/"
 if [[ -n ${2:-} ]]; then
+  # Only the run folder paper/: no member outside it, and none over an existing file.
+  members=$(tar -tzf "$state_dir/paper_state.tar.gz")
+  if grep -qvE '^(\./)?paper(/|$)' <<<"$members"; then
+    echo "the state holds files outside paper/: not unpacked" >&2
+    exit 1
+  fi
   mkdir -p "$2"
-  tar -xzf "$state_dir/paper_state.tar.gz" -C "$2"
+  tar -xzf "$state_dir/paper_state.tar.gz" -C "$2" --keep-old-files
   echo "unpacked into $2/paper"
 fi

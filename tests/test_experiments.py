@@ -358,16 +358,14 @@ def test_quick_chain_runs_end_to_end_then_skips_everything(tmp_path, capsys):
     assert capsys.readouterr().out.count("skipped") == len(stages)
 
 
-def test_take_state_keeps_a_second_runs_state_apart_and_refuses_a_bad_join(tmp_path):
-    """experiments/take_state.sh joins a device call's pieces into STATE_DIR only, leaving the
-    first run's state as it was; pieces that do not match their sha256 change nothing."""
+def _state_pieces(tmp_path):
+    """(take(*args): runs a copy of experiments/take_state.sh on a device call's files, the
+    whole state's bytes, the folder of its pieces) for a run folder paper/ with one stage.json
+    ({}); take_state.sh keeps the state in the copy's STATE_DIR .paper_state_rerun."""
     repo = tmp_path / "repo"
     (repo / "experiments").mkdir(parents=True)
     script = repo / "experiments" / "take_state.sh"
     shutil.copy(paper.REPO / "experiments" / "take_state.sh", script)
-    first = repo / ".paper_state" / "paper_state.tar.gz"
-    first.parent.mkdir()
-    first.write_bytes(b"the first run")
     (tmp_path / "paper").mkdir()
     (tmp_path / "paper" / "stage.json").write_text("{}")
     whole = tmp_path / "paper_state.tar.gz"
@@ -388,6 +386,18 @@ def test_take_state_keeps_a_second_runs_state_apart_and_refuses_a_bad_join(tmp_p
             ["bash", str(script), str(files_at), *args], env=env, capture_output=True, text=True
         )
 
+    return take, blob, files_at
+
+
+def test_take_state_keeps_a_second_runs_state_apart_and_refuses_a_bad_join(tmp_path):
+    """experiments/take_state.sh joins a device call's pieces into STATE_DIR only, leaving the
+    first run's state as it was; pieces that do not match their sha256 change nothing."""
+    take, blob, files_at = _state_pieces(tmp_path)
+    repo = tmp_path / "repo"
+    first = repo / ".paper_state" / "paper_state.tar.gz"
+    first.parent.mkdir()
+    first.write_bytes(b"the first run")
+    half = len(blob) // 2
     done = take(str(tmp_path / "unpacked"))
     assert done.returncode == 0, done.stderr
     assert (repo / ".paper_state_rerun" / "paper_state.tar.gz").read_bytes() == blob
@@ -397,6 +407,25 @@ def test_take_state_keeps_a_second_runs_state_apart_and_refuses_a_bad_join(tmp_p
     bad = take()
     assert bad.returncode == 1 and "does not match" in bad.stderr
     assert (repo / ".paper_state_rerun" / "paper_state.tar.gz").read_bytes() == blob
+
+
+def test_take_state_never_unpacks_over_a_run_folder(tmp_path):
+    """An older state unpacked where a run folder already is: refused before anything changes,
+    the newer folder (and a user's file in it) as it was, the state not even kept."""
+    take, _, _ = _state_pieces(tmp_path)
+    newer = tmp_path / "unpacked" / "paper"
+    (newer / "table").mkdir(parents=True)
+    (newer / "table" / "stage.json").write_text('{"newer": true}')
+    (newer / "notes.txt").write_text("mine")
+    refused = take(str(tmp_path / "unpacked"))
+    assert refused.returncode == 1
+    assert "paper exists" in refused.stderr and "does not unpack over" in refused.stderr
+    assert sorted(p.name for p in newer.iterdir()) == ["notes.txt", "table"]
+    assert (newer / "table" / "stage.json").read_text() == '{"newer": true}'
+    assert not (tmp_path / "repo" / ".paper_state_rerun").exists()
+    done = take(str(tmp_path / "elsewhere"))  # beside it, on request
+    assert done.returncode == 0, done.stderr
+    assert (tmp_path / "elsewhere" / "paper" / "stage.json").read_text() == "{}"
 
 
 def test_compare_runs_names_equal_and_differing_outputs_and_each_seeds_held_out_number(
