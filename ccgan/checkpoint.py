@@ -70,6 +70,21 @@ def fingerprint(*arrays) -> str:
     return h.hexdigest()[:16]
 
 
+def _write_atomically(path: Path, blob: bytes) -> None:
+    """Writes `blob` to a temporary file beside `path`, fsyncs it and renames it over `path`."""
+    fd, tmp = tempfile.mkstemp(prefix=path.name + ".", suffix=".tmp", dir=path.parent)
+    try:
+        with os.fdopen(fd, "wb") as f:
+            f.write(blob)
+            f.flush()
+            os.fsync(f.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+        raise
+
+
 def save(path: str | os.PathLike, tree: Any, meta: dict) -> Path:
     """Writes `tree` and JSON-able `meta` to `path` atomically.
 
@@ -93,17 +108,7 @@ def save(path: str | os.PathLike, tree: Any, meta: dict) -> Path:
         },
         use_bin_type=True,
     )
-    fd, tmp = tempfile.mkstemp(prefix=path.name + ".", suffix=".tmp", dir=path.parent)
-    try:
-        with os.fdopen(fd, "wb") as f:
-            f.write(blob)
-            f.flush()
-            os.fsync(f.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
+    _write_atomically(path, blob)
     return path
 
 
@@ -198,3 +203,42 @@ def link_first_seed(folder: str | os.PathLike, seed_file: str) -> Path:
         tmp.write_bytes((folder / seed_file).read_bytes())
     os.replace(tmp, link)
     return link
+
+
+def rewrite_meta(path: str | os.PathLike, update: dict) -> dict:
+    """Adds or replaces metadata keys of a checkpoint file, leaving its payload byte for byte.
+
+    The file is read and verified (`read`), its meta updated with `update`, and written back
+    atomically with the same payload bytes and payload sha256; the written file is read again
+    and its payload digest compared with the old one.
+
+    Args:
+      path: a checkpoint file (not a symbolic link: a link's target is the file to rewrite).
+      update: JSON-able metadata keys to set.
+
+    Returns:
+      {"payload_sha256": unchanged digest, "meta": the new metadata}.
+
+    Raises:
+      CheckpointError: as `read`, `path` is a symbolic link, or the payload digest changed.
+    """
+    path = Path(path)
+    if path.is_symlink():
+        raise CheckpointError(f"{path} is a symbolic link: rewrite the file it names")
+    meta, payload = read(path)
+    digest = hashlib.sha256(payload).hexdigest()
+    new_meta = meta | json.loads(json.dumps(update, sort_keys=True))
+    blob = msgpack.packb(
+        {
+            "format": FORMAT,
+            "meta": json.dumps(new_meta, sort_keys=True),
+            "sha256": digest,
+            "payload": payload,
+        },
+        use_bin_type=True,
+    )
+    _write_atomically(path, blob)
+    _, again = read(path)
+    if hashlib.sha256(again).hexdigest() != digest:
+        raise CheckpointError(f"{path}: payload digest changed while rewriting its metadata")
+    return {"payload_sha256": digest, "meta": new_meta}

@@ -287,6 +287,7 @@ class DomainData(NamedTuple):
       domain: the files' domain name.
       model_hash: `mjx_arm.Arm.model_hash` of the arm they were simulated with.
       paths: the files, as given.
+      splits: each file's (split, trajectories), in order ("train", "val", ...).
     """
 
     pressures_bar: np.ndarray
@@ -295,6 +296,7 @@ class DomainData(NamedTuple):
     domain: str
     model_hash: str
     paths: tuple[str, ...]
+    splits: tuple[tuple[str, int], ...] = ()
 
 
 def _listing(paths, values) -> str:
@@ -367,7 +369,69 @@ def read_domain(
         domain=sets[0].domain,
         model_hash=sets[0].model_hash,
         paths=names,
+        splits=tuple((d.split, int(d.pressures_bar.shape[0])) for d in sets),
     )
+
+
+def check_slot_splits(n_val: int, d_s: DomainData, d_c: DomainData) -> list[str]:
+    """`check_splits` of both slots (--source, --constrained); returns their notes."""
+    notes = [
+        check_splits(d, n_val, flag) for flag, d in (("--source", d_s), ("--constrained", d_c))
+    ]
+    return [note for note in notes if note]
+
+
+def check_splits(d: DomainData, n_val: int, flag: str = "the files") -> str | None:
+    """Refuses a slot's files whose splits do not fit how training uses them.
+
+    Training concatenates the files in order and holds out the last `n_val` trajectories
+    (`prepare`). So a file of the "val" split must come after every "train" file and must not
+    be the only data (it would be trained on), and when "val" files are given the held-out
+    trajectories must all come from them (else a "train" file is held out as validation data).
+    Without any "val" file the last `n_val` trajectories of the "train" files are held out.
+
+    Args:
+      d: one slot's files (`read_domain`).
+      n_val: trajectories held out (TrainConfig.n_val).
+      flag: the option that named the files, for messages.
+
+    Returns:
+      None, or a note when the "val" files hold more than `n_val` trajectories: the rest of
+      them are trained on (the chain's ccgan_large holds out 3 of its 10).
+
+    Raises:
+      mjx_arm.dataset.DatasetError: naming the files and their splits.
+    """
+    from mjx_arm.dataset import DatasetError
+
+    listing = _listing(d.paths, [split for split, _ in d.splits])
+    kinds = [split for split, _ in d.splits]
+    if "train" not in kinds and "val" in kinds:
+        raise DatasetError(
+            f"{flag}: only validation-split files, which training would train on: {listing};"
+            " give the training-split file first (<domain>_train.npz, then <domain>_val.npz)"
+        )
+    last_train = max((i for i, k in enumerate(kinds) if k == "train"), default=-1)
+    if any(k == "val" for k in kinds[: last_train + 1]):
+        raise DatasetError(
+            f"{flag}: a validation-split file comes before a training-split one, so training"
+            f" would train on it and hold out training data: {listing}; list the"
+            " validation file last"
+        )
+    n_val_files = sum(n for split, n in d.splits if split == "val")
+    if 0 < n_val_files < n_val:
+        raise DatasetError(
+            f"{flag}: --n-val {n_val} holds out {n_val - n_val_files} trajectories of the"
+            f" training-split files besides the {n_val_files} of the validation-split ones:"
+            f" {listing}; give --n-val {n_val_files}"
+        )
+    if n_val_files > n_val:
+        return (
+            f"{flag}: --n-val {n_val} holds out {n_val} of the {n_val_files} validation-split"
+            f" trajectories; the other {n_val_files - n_val} are trained on (--n-val"
+            f" {n_val_files} holds out the whole validation file)"
+        )
+    return None
 
 
 def read_translation_files(

@@ -35,7 +35,7 @@ is shape-like (README: stages 4-5).
 The output files are translator checkpoints like `ccgan.train`'s (same generator, F_c, k and
 pose bounds; the fine-tuning settings and history added to their metadata), named
 `translator_seed{s}.ckpt` and `translator.ckpt` (a link to the first seed's), for
-`ccgan.load_translator` and `python -m eval.shapes --ccgan-path`.
+`ccgan.load_translator` and `python -m eval.shapes --ccgan-sim-path`.
 
     python -m ccgan.finetune --translators results/paper/run/ccgan/translator_seed{0,1,2}.ckpt \\
         --seeds 0 1 2 --out runs/ccgan_ft

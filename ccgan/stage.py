@@ -26,7 +26,12 @@ import mjx_arm  # noqa: F401  (before jax: sets the XLA CPU flag)
 from ccgan import checkpoint
 from ccgan.cli import check_output_dir, cli_parser
 from ccgan.data import PRESSURE_DIM, denormalise_pressure
-from ccgan.translator import Translator, translator_from_checkpoint
+from ccgan.translator import (
+    TRUST_FLAG,
+    Translator,
+    check_labels,
+    translator_from_checkpoint,
+)
 from mjx_arm import constants
 
 
@@ -193,7 +198,13 @@ def stage_parser(module: str, doc: str) -> argparse.ArgumentParser:
         "--domain",
         default="constrained",
         choices=sorted(d for d in mjx_arm.DOMAINS if d != "source"),
-        help="D_c domain (mjx_arm.DOMAINS)",
+        help="D_c domain (mjx_arm.DOMAINS): the one the translators translate into",
+    )
+    p.add_argument(
+        TRUST_FLAG,
+        action="store_true",
+        help="accept translator files that do not record their method, domains and arm (the"
+        " solid-disc arm's); the labels they do record are still checked",
     )
     return p
 
@@ -215,10 +226,20 @@ class Stage:
         self, params, per_seed_meta: list[dict], history: dict, json_name: str, k: int | None = None
     ) -> None:
         """Writes each seed's translator file (G_c replaced, the stage's record added to its
-        metadata; k, the hold factor, replaced when given) and the history, atomically."""
+        metadata; k, the hold factor, replaced when given) and the history, atomically.
+
+        Each file is labelled (`ccgan.translator.LABELS`) as this stage's: its method, source
+        -> this stage's domain, and the arm simulated here."""
+        labels = {
+            "method": self.run["method"],
+            "source_domain": "source",
+            "target_domain": self.run["domain"],
+            "model_hash": self.run["model_hash"],
+        }
         for s_i, (seed, source) in enumerate(zip(self.seeds, self.sources, strict=True)):
             meta = self.run | {"seed": seed} | per_seed_meta[s_i]
             tree, file_meta = finetuned_checkpoint(source, params[s_i], meta)
+            file_meta = file_meta | labels
             if k is not None:
                 file_meta = file_meta | {"k": int(k)}
             checkpoint.save(self.out / f"translator_seed{seed}.ckpt", tree, file_meta)
@@ -237,7 +258,8 @@ def trained_model_hash(meta: dict) -> str | None:
 def start_stage(p: argparse.ArgumentParser, a, module: str, config: dict, argv) -> Stage:
     """Checks and loads what `stage_parser`'s flags name; `module` and `config` go into the run
     record. Every problem (seeds, output folder, an unreadable translator or MJCF, translators
-    recorded on another arm) is a usage error (status 2) before any simulation starts."""
+    recorded on another arm, or for another domain, or recording neither without
+    --trust-unlabelled-translators) is a usage error (status 2) before any simulation starts."""
     import jax
 
     from mjx_arm.machine import cpu_model, enable_compilation_cache
@@ -261,12 +283,17 @@ def start_stage(p: argparse.ArgumentParser, a, module: str, config: dict, argv) 
     except (FileNotFoundError, ValueError) as err:  # ModelValidationError is a ValueError
         p.error(f"--model {a.model}: {err}")
     for path, (_, meta) in zip(a.translators, sources, strict=True):
-        trained = trained_model_hash(meta)
-        if trained is not None and trained != arm_c.model_hash:
-            p.error(
-                f"{path} was trained on the arm with model hash {trained}, but --model"
-                f" {a.model} has {arm_c.model_hash}"
+        try:
+            check_labels(
+                meta,
+                path,
+                source_domain="source",
+                target_domain=a.domain,
+                model_hash=arm_c.model_hash,
+                trust_unlabelled=a.trust_unlabelled_translators,
             )
+        except checkpoint.CheckpointError as err:
+            p.error(f"--translators: {err} (--model {a.model}, --domain {a.domain})")
     enable_compilation_cache()
     out = Path(a.out)
     out.mkdir(parents=True, exist_ok=True)
@@ -278,6 +305,7 @@ def start_stage(p: argparse.ArgumentParser, a, module: str, config: dict, argv) 
         "model": str(a.model),
         "model_hash": arm_c.model_hash,
         "domain": a.domain,
+        "method": module.rsplit(".", 1)[-1],
         "sources": [str(x) for x in a.translators],
         "seeds": seeds,
     }

@@ -133,6 +133,7 @@ def train_and_evaluate(
     progress: bool = True,
     model_hash: str | None = None,
     stop=None,
+    domains: tuple[str, str] | None = None,
 ):
     """Trains one or several seeds (vmapped), with a CSV log, checkpoints and a translator file.
 
@@ -149,6 +150,9 @@ def train_and_evaluate(
       progress: show a tqdm bar over epochs.
       model_hash: `Arm.model_hash` of the arm the data comes from, recorded in the translator
         files (`ccgan.finetune` and `ccgan.distill` refuse to refine them on another arm).
+      domains: (source, target) domain names of the data (e.g. ("source", "aged")), recorded
+        with the method and `model_hash` as the translator files' labels
+        (`ccgan.translator.LABELS`); without them and `model_hash` the files are unlabelled.
       stop: a `threading.Event`; once set, the run checkpoints after the epoch in progress and
         returns unfinished (no translator files), to be resumed.
 
@@ -177,7 +181,15 @@ def train_and_evaluate(
     bar.close()
     if int(np.asarray(state.epoch)[0]) >= config.epochs:
         _save_translators(
-            workdir, state, seeds, data, config, forward_c_params, forward_model, model_hash
+            workdir,
+            state,
+            seeds,
+            data,
+            config,
+            forward_c_params,
+            forward_model,
+            model_hash,
+            domains,
         )
     return state, rows
 
@@ -274,6 +286,7 @@ def _save_translators(
     forward_c_params,
     forward_model: ForwardModel | None,
     model_hash: str | None,
+    domains: tuple[str, str] | None = None,
 ) -> None:
     """Writes `translator_seed{s}.ckpt` per seed; `translator.ckpt` links to the first seed's.
 
@@ -293,6 +306,7 @@ def _save_translators(
             forward_c_params,
             forward_model,
             model_hash=model_hash,
+            domains=domains,
         )
     checkpoint.link_first_seed(workdir, f"translator_seed{seeds[0]}.ckpt")
 
@@ -425,6 +439,7 @@ def main(argv=None) -> None:
     one exits with status 2 and a message naming it.
     """
     from ccgan import data as data_lib
+    from mjx_arm.dataset import DatasetError
 
     parser = build_parser()
     args = parser.parse_args(argv)
@@ -436,6 +451,12 @@ def main(argv=None) -> None:
         parser.error(f"--seeds must be distinct, got {args.seeds}")
     check_output_dir(parser, "--workdir", args.workdir)
     d_s, d_c = data_from_args(parser, args)
+    try:
+        split_notes = data_lib.check_slot_splits(config.n_val, d_s, d_c)
+    except DatasetError as err:
+        parser.error(str(err))
+    for note in split_notes:
+        print(f"NOTE: {note}", file=sys.stderr)
 
     from mjx_arm.machine import enable_compilation_cache
 
@@ -482,6 +503,7 @@ def main(argv=None) -> None:
         progress=not args.no_progress,
         model_hash=d_s.model_hash,
         stop=stop,
+        domains=(d_s.domain, d_c.domain),
     )
     if int(np.asarray(state.epoch)[0]) < config.epochs:
         print(

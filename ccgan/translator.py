@@ -37,6 +37,107 @@ PRESSURE_RANGE_BAR = (-0.5, 5.0)
 MAX_TIP_DISTANCE_M = 2.0
 #: Largest |norm(d3) - 1| accepted: d3 is the tip's unit tangent.
 D3_NORM_TOLERANCE = 0.05
+#: Largest command `Translator.predict_poses` accepts (bar): the valves saturate at 3.5 bar, so
+#: a command above 10 bar is in other units (kPa, psi) rather than an over-driven valve.
+MAX_COMMAND_BAR = 10.0
+
+#: The methods a translator file records ("method" in its metadata): `ccgan.train`'s CCGAN-GP
+#: and its WCGAN-GP baseline, and the stages that refine them in the simulator
+#: (`ccgan.finetune`, `ccgan.distill`).
+METHODS = ("ccgan", "wcgan", "finetune", "distill")
+#: What a translator file says it is, each a metadata key: its method, the domains it translates
+#: from and into (mjx_arm.DOMAINS names: "source" -> "constrained" or "aged") and the
+#: `mjx_arm.Arm.model_hash` of the arm it was trained (or last refined) on.
+LABELS = ("method", "source_domain", "target_domain", "model_hash")
+#: The flag of every command that loads translators which lets files without LABELS through.
+TRUST_FLAG = "--trust-unlabelled-translators"
+
+
+class TranslatorMismatchError(checkpoint.CheckpointError):
+    """A translator file is labelled for another method, domain or arm than the one asked for."""
+
+
+class UnlabelledTranslatorError(checkpoint.CheckpointError):
+    """A translator file does not record what it is (`LABELS`) and was not trusted."""
+
+
+def translator_labels(meta: dict) -> dict:
+    """{label: value} of the `LABELS` a translator file's metadata records.
+
+    Its model hash is the one of the last fine-tune stage that refined it, where one did (files
+    written before the labels recorded the arm there, or only `ccgan.train`'s top-level one).
+    """
+    labels = {key: meta[key] for key in LABELS if key in meta}
+    stage_hash = (meta.get("finetune") or {}).get("model_hash")
+    if stage_hash:
+        labels["model_hash"] = stage_hash
+    return labels
+
+
+def missing_labels(meta: dict) -> list[str]:
+    """The `LABELS` a translator file's metadata does not record itself."""
+    return [key for key in LABELS if key not in meta]
+
+
+def check_labels(
+    meta: dict,
+    path="translator",
+    *,
+    method: str | tuple[str, ...] | None = None,
+    source_domain: str | None = None,
+    target_domain: str | None = None,
+    model_hash: str | None = None,
+    trust_unlabelled: bool = False,
+) -> dict:
+    """Refuses a translator file that is not what the caller expects; returns its labels.
+
+    Args:
+      meta: the file's metadata (`checkpoint.load`'s second item).
+      path: the file, named in messages.
+      method: the method (or methods, a tuple) it must have been made by (`METHODS`).
+      source_domain, target_domain: the domains it must translate between.
+      model_hash: the `Arm.model_hash` of the arm it must have been trained on.
+        None for any of these: not checked.
+      trust_unlabelled: let a file through that does not record every label (files written
+        before labels: the solid-disc arm's); the labels it does record are still checked.
+
+    Returns:
+      `translator_labels(meta)`.
+
+    Raises:
+      UnlabelledTranslatorError: a label is not recorded and `trust_unlabelled` is False.
+      TranslatorMismatchError: a label differs from the expected value; the message names both.
+    """
+    labels = translator_labels(meta)
+    missing = missing_labels(meta)
+    if missing and not trust_unlabelled:
+        raise UnlabelledTranslatorError(
+            f"{path} does not record its {', '.join(missing)} (written before translator files"
+            " were labelled, like the solid-disc arm's in results/solid/translators/), so it"
+            f" cannot be checked against this run: pass {TRUST_FLAG} (trust_unlabelled=True)"
+            " to use it anyway"
+        )
+    wanted = {
+        "method": method,
+        "source_domain": source_domain,
+        "target_domain": target_domain,
+        "model_hash": model_hash,
+    }
+    for key, want in wanted.items():
+        allowed = (want,) if isinstance(want, str) else tuple(want or ())
+        if allowed and key in labels and labels[key] not in allowed:
+            raise TranslatorMismatchError(
+                f"{path} is a {describe_labels(labels)}, but this run expects {key}"
+                f" {' or '.join(map(repr, allowed))}; the file has {labels[key]!r}"
+            )
+    return labels
+
+
+def describe_labels(labels: dict) -> str:
+    """ "ccgan translator source -> aged, arm 70c7aaddecf5fdd7" (what a file's labels tell)."""
+    domains = f"{labels.get('source_domain', '?')} -> {labels.get('target_domain', '?')}"
+    arm = labels.get("model_hash", "not recorded")
+    return f"{labels.get('method', 'unknown-method')} translator {domains}, arm {arm}"
 
 
 def check_program(pressures_bar, poses) -> tuple[np.ndarray, np.ndarray]:
@@ -98,11 +199,15 @@ def save_translator(
     forward_c_params=None,
     forward_model: ForwardModel | None = None,
     model_hash: str | None = None,
+    domains: tuple[str, str] | None = None,
 ) -> Path:
     """Writes G_c (and optionally F_c), k and the pose bounds to one checkpoint file.
 
-    `model_hash` (`mjx_arm.Arm.model_hash` of the arm the training data was simulated with) is
-    recorded when given, so later stages can refuse to refine the translator on another arm.
+    The file records its `LABELS`: the method (from `config.baseline`: "wcgan" or "ccgan"),
+    `domains` (source, target: the training data's domain names) and `model_hash`
+    (`mjx_arm.Arm.model_hash` of the arm the data was simulated with), so that
+    `load_translator` and the commands can refuse it for another method, domain or arm. Without
+    `domains` or `model_hash` the file is unlabelled (`check_labels` refuses it unless trusted).
     """
     fwd = forward_model or ForwardModel()
     tree = {"g_c": g_c_params}
@@ -115,9 +220,12 @@ def save_translator(
         "generator": {"hidden": config.gen_hidden, "fc": config.gen_fc},
         "forward": {"hidden": fwd.hidden, "fc": fwd.fc},
         "config": config.to_dict(),
+        "method": "wcgan" if config.baseline else "ccgan",
     }
     if model_hash is not None:
         meta["model_hash"] = model_hash
+    if domains is not None:
+        meta["source_domain"], meta["target_domain"] = domains
     return checkpoint.save(path, tree, meta)
 
 
@@ -155,12 +263,27 @@ class Translator:
         """F_c's open-loop poses [T', 6] (m, unit d3) for D_c commands [T', 3] (bar) from pose0 [6].
 
         Raises:
-          ValueError: the file held no F_c.
+          ValueError: the file held no F_c; commands not [T', 3], empty, non-finite, or above
+            MAX_COMMAND_BAR (in kPa or psi, not bar); pose0 not [6] or non-finite.
         """
         if self.f_c_params is None:
             raise ValueError("this translator was saved without F_c")
-        p = jnp.asarray(normalise_pressure(np.asarray(pressures_c, np.float32)))[None]
-        x0 = jnp.asarray(normalise_pose(np.asarray(pose0, np.float32), self.bounds))[None]
+        p_bar = np.asarray(pressures_c, np.float32)
+        x0 = np.asarray(pose0, np.float32)
+        if p_bar.ndim != 2 or p_bar.shape[1] != PRESSURE_DIM or p_bar.shape[0] == 0:
+            raise ValueError(f"need commands [T, 3] with T >= 1 (bar), got {p_bar.shape}")
+        if x0.shape != (6,):
+            raise ValueError(f"need pose0 [6] (tip m, unit d3), got {x0.shape}")
+        for name, a in (("commands", p_bar), ("pose0", x0)):
+            if not np.isfinite(a).all():
+                raise ValueError(f"{name} have non-finite values (NaN or inf)")
+        if np.abs(p_bar).max() > MAX_COMMAND_BAR:
+            raise ValueError(
+                f"commands reach {np.abs(p_bar).max():.4g}, beyond {MAX_COMMAND_BAR} bar (the"
+                " valves saturate at 3.5 bar): pass bar, not kPa or psi"
+            )
+        p = jnp.asarray(normalise_pressure(p_bar))[None]
+        x0 = jnp.asarray(normalise_pose(x0, self.bounds))[None]
         pred = forward_open_loop(self.forward_model, self.f_c_params, p, x0)
         return denormalise_pose(np.asarray(pred[0], np.float64), self.bounds)
 
@@ -182,16 +305,43 @@ def translator_path(path: str | os.PathLike | None = None) -> Path:
     return Path(os.environ.get("CCGAN_TRANSLATOR") or DEFAULT_PATH)
 
 
-def load_translator(path: str | os.PathLike | None = None) -> Translator:
-    """Loads a translator written by `ccgan.train` (default: $CCGAN_TRANSLATOR or DEFAULT_PATH).
+def load_translator(
+    path: str | os.PathLike | None = None,
+    *,
+    method: str | tuple[str, ...] | None = None,
+    source_domain: str | None = None,
+    target_domain: str | None = None,
+    model_hash: str | None = None,
+    trust_unlabelled: bool = False,
+) -> Translator:
+    """Loads a translator file (default: $CCGAN_TRANSLATOR or DEFAULT_PATH) that is what it
+    is expected to be.
+
+    Args:
+      path: the file (`translator_path`).
+      method, source_domain, target_domain, model_hash: what the file must record
+        (`check_labels`), e.g. `target_domain="aged", model_hash=arm.model_hash`; None: any.
+      trust_unlabelled: accept a file that records no labels (the solid-disc arm's).
 
     Raises:
       ValueError: `path` is an empty string.
       FileNotFoundError: no file at the path (`checkpoint.CheckpointNotFoundError`, naming it).
       ccgan.checkpoint.CheckpointError: corrupt, or not a translator file.
+      TranslatorMismatchError, UnlabelledTranslatorError: (CheckpointErrors) the file is labelled
+        otherwise than expected, or not labelled and not trusted (`check_labels`).
     """
     path = translator_path(path)
-    return translator_from_checkpoint(checkpoint.load(path), path)
+    source = checkpoint.load(path)
+    check_labels(
+        source[1],
+        path,
+        method=method,
+        source_domain=source_domain,
+        target_domain=target_domain,
+        model_hash=model_hash,
+        trust_unlabelled=trust_unlabelled,
+    )
+    return translator_from_checkpoint(source, path)
 
 
 def translator_from_checkpoint(source: tuple[dict, dict], path="checkpoint") -> Translator:

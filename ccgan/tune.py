@@ -46,6 +46,7 @@ from ccgan.cli import (
 from ccgan.config import TrainConfig, check_forward_config
 from ccgan.train import data_fingerprint
 from ccgan.trainer import make_trainer
+from mjx_arm.dataset import DatasetError
 from mjx_arm.machine import cpu_model
 from tracking.config import ConfigError, check_fields
 
@@ -398,6 +399,12 @@ def main(argv=None) -> None:
         if not fc.is_file():
             parser.error(f"--forward-workdir {args.forward_workdir}: no {fc}")
     d_s, d_c = data_from_args(parser, args)
+    try:
+        split_notes = data_lib.check_slot_splits(base.n_val, d_s, d_c)
+    except DatasetError as err:
+        parser.error(str(err))
+    for note in split_notes:
+        print(f"NOTE: {note}", file=sys.stderr)
     bounds = data_lib.union_bounds(d_s.bounds, d_c.bounds)
 
     start = time.perf_counter()

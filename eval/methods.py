@@ -60,6 +60,10 @@ CCGAN_SIM_DEFAULT_PATH = TRANSLATORS_DIR / "ccgan_sim" / "translator.ckpt"
 WCGAN_DEFAULT_PATH = TRANSLATORS_DIR / "wcgan" / "translator.ckpt"
 #: The flag that gives each translator method's checkpoint, named in notes and errors.
 PATH_FLAGS = {"ccgan": "--ccgan-path", "wcgan": "--wcgan-path", "ccgan_sim": "--ccgan-sim-path"}
+#: The "method" a translator file must record (`ccgan.translator.LABELS`) to be scored as each
+#: translator method: a WCGAN-GP file is never reported as CCGAN-GP, a trained one never as
+#: refined in the simulator.
+FILE_METHODS = {"ccgan": ("ccgan",), "wcgan": ("wcgan",), "ccgan_sim": ("distill", "finetune")}
 
 
 class TranslatorError(ValueError):
@@ -138,7 +142,9 @@ def load_translator(method: str, cfg) -> tuple[TranslatorMethod | None, str]:
     Only a default checkpoint may be absent: then (None, a note naming the file and the flag that
     gives another). One that was asked for (`translator_source`) and is absent, or any that does
     not load, raises, so a run never reports a table without the method it was asked to score.
-    The arms the files record (`ccgan.finetune.trained_model_hash`) go into
+    Every file must be labelled (`ccgan.translator.check_labels`) as made by the method
+    (`FILE_METHODS`) from "source" into cfg.target_domain; a file without labels (the solid-disc
+    arm's) loads only with cfg.trust_unlabelled_translators. The arms the files record go into
     `TranslatorMethod.model_hashes`, for `check_translator_arms`.
 
     Args:
@@ -149,7 +155,8 @@ def load_translator(method: str, cfg) -> tuple[TranslatorMethod | None, str]:
       (translator, "loaded" or what was loaded) or (None, why).
 
     Raises:
-      TranslatorError: an asked-for checkpoint is absent, or a checkpoint does not load.
+      TranslatorError: an asked-for checkpoint is absent, a checkpoint does not load, or it is
+        labelled for another method or domain, or not labelled and not trusted.
     """
     path, asked = translator_source(method, cfg)
     flag = PATH_FLAGS[method] + (" or $CCGAN_TRANSLATOR" if method == "ccgan" else "")
@@ -158,8 +165,12 @@ def load_translator(method: str, cfg) -> tuple[TranslatorMethod | None, str]:
             raise TranslatorError(f"{method}: no translator checkpoint at {path} ({flag})")
         return None, f"no translator at its default {path} (give one with {flag})"
     from ccgan import checkpoint
-    from ccgan.finetune import trained_model_hash
-    from ccgan.translator import translator_from_checkpoint
+    from ccgan.translator import (
+        TranslatorMismatchError,
+        UnlabelledTranslatorError,
+        check_labels,
+        translator_from_checkpoint,
+    )
 
     hashes = set()
 
@@ -168,11 +179,25 @@ def load_translator(method: str, cfg) -> tuple[TranslatorMethod | None, str]:
         try:
             source = checkpoint.load(file)
             translator = translator_from_checkpoint(source, file)
+            labels = check_labels(
+                source[1],
+                file,
+                method=FILE_METHODS[method],
+                source_domain="source",
+                target_domain=cfg.target_domain,
+                trust_unlabelled=cfg.trust_unlabelled_translators,
+            )
+        except TranslatorMismatchError as err:
+            raise TranslatorError(
+                f"{method} ({PATH_FLAGS[method]}, --target-domain {cfg.target_domain}): {err}"
+            ) from err
+        except UnlabelledTranslatorError as err:
+            raise TranslatorError(f"{method}: {err}") from err
         except Exception as err:  # noqa: BLE001  (any failure to load is this error)
             raise TranslatorError(
                 f"{method}: {file} does not load ({type(err).__name__}: {err})"
             ) from err
-        hashes.add(trained_model_hash(source[1]))
+        hashes.add(labels.get("model_hash"))
         return translator
 
     obj = checked(path)

@@ -124,6 +124,9 @@ class EvalConfig:
     """Checkpoint of the WCGAN-GP baseline (None: WCGAN_DEFAULT_PATH)."""
     ccgan_sim_path: str | None = None
     """Checkpoint of the simulator-fine-tuned CCGAN-GP (None: CCGAN_SIM_DEFAULT_PATH)."""
+    trust_unlabelled_translators: bool = False
+    """Score translator files that do not record their method, domains and arm (the solid-disc
+    arm's, results/solid/translators/); labelled files are always checked."""
     oracle: OracleConfig = OracleConfig()
     """Oracle settings."""
     video_fps: int = 15

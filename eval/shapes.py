@@ -18,6 +18,7 @@ import sys
 import time
 
 from ccgan.cli import HelpFormatter
+from ccgan.translator import TRUST_FLAG
 from eval.methods import DEFAULT_METHODS, METHODS, PATH_FLAGS, TranslatorError
 from eval.pipeline import RESULTS_DIR, RUNS_DIR, EvalConfig, default_methods, evaluate, quick
 from mjx_arm import programs
@@ -217,6 +218,13 @@ def _add_arm_options(p: argparse.ArgumentParser) -> None:
         help="fine-tuned CCGAN-GP checkpoint"
         " (default: results/paper/run/ccgan_sim/translator.ckpt, skipped if absent)",
     )
+    p.add_argument(
+        TRUST_FLAG,
+        action="store_true",
+        help="score translator files that do not record their method, domains and arm (the"
+        " solid-disc arm's, results/solid/translators/); a file labelled for another method,"
+        " domain or arm is refused either way",
+    )
 
 
 def _add_oracle_options(p: argparse.ArgumentParser) -> None:
@@ -277,6 +285,7 @@ def parse_args(argv: list[str] | None = None) -> EvalConfig:
             ccgan_path=a.ccgan_path,
             wcgan_path=a.wcgan_path,
             ccgan_sim_path=a.ccgan_sim_path,
+            trust_unlabelled_translators=a.trust_unlabelled_translators,
             target_domain=a.target_domain,
             oracle=OracleConfig(
                 steps=a.oracle_steps,

@@ -321,7 +321,8 @@ def test_end_to_end_and_resume_equals_uninterrupted(tiny_setup, tmp_path):
                 assert np.isfinite(float(row[m])), m
         assert int(float(row["k"])) in TINY.hold_factors
     assert np.isfinite([float(r["val_error_cm"]) for r in rows if int(r["epoch"]) % 2 == 0]).all()
-    tr = ccgan.load_translator(tmp_path / "full" / "translator.ckpt")
+    # Written without the data's domains and arm, so unlabelled (ccgan.train's CLI labels them).
+    tr = ccgan.load_translator(tmp_path / "full" / "translator.ckpt", trust_unlabelled=True)
     ps = np.full((7, 3), 1.0)
     xs = np.tile(data_lib.denormalise_pose(data.source.val[0, 0, 3:], data.bounds), (7, 1))
     pc, k = tr.translate(ps, xs)

@@ -22,6 +22,7 @@ from ccgan import config as config_lib
 from ccgan import data as data_lib
 from ccgan import forward as forward_lib
 from ccgan import train as train_lib
+from ccgan import translator as translator_lib
 from ccgan.models import Generator
 from ccgan.translator import SOLID_TRANSLATORS_DIR, Translator, translator_path
 from mjx_arm import constants
@@ -40,7 +41,7 @@ def small_arm(small_xml, tmp_path_factory):
     return str(path), mjx_arm.load(path).model_hash
 
 
-def write_dataset(path, domain, model_hash, n=4, steps=20, seed=0):
+def write_dataset(path, domain, model_hash, n=4, steps=20, seed=0, split="train"):
     """A synthetic babbling file: held random pressures, poses a smooth random walk."""
     rng = np.random.default_rng(seed)
     pressures = random_held_programs(rng, n, steps).astype(np.float32)
@@ -48,7 +49,7 @@ def write_dataset(path, domain, model_hash, n=4, steps=20, seed=0):
     low, high = poses.reshape(-1, 6).min(0), poses.reshape(-1, 6).max(0)
     save_dataset(
         path,
-        Dataset(pressures, poses, low, high, domain, {}, model_hash, seed=seed, split="train"),
+        Dataset(pressures, poses, low, high, domain, {}, model_hash, seed=seed, split=split),
     )
     return str(path)
 
@@ -199,7 +200,7 @@ def test_committed_translator_config_reads_with_the_renamed_field():
     assert "stretch_choices" in stored
     config = config_lib.TrainConfig.from_dict(stored)
     assert config.hold_factors == tuple(stored["stretch_choices"])
-    assert load_translator(path).k in config.hold_factors
+    assert load_translator(path, trust_unlabelled=True).k in config.hold_factors
 
 
 def test_train_cli_refuses_a_file_as_workdir(tmp_path, files, capsys):
@@ -295,7 +296,7 @@ def test_stage_clis_refuse_bad_paths(tmp_path, small_arm, shipped, main, capsys)
 
 def test_stages_simulate_the_arm_named_by_model(tmp_path, small_arm, shipped, capsys):
     """Default: the I-Support arm the committed translators were trained on; a translator
-    recorded on another arm is refused."""
+    labelled for another arm or domain is refused, an unlabelled one unless trusted."""
     for module in (finetune, distill):
         p = module.build_parser()
         assert p.parse_args(["--translators", "t", "--out", "o"]).model == str(
@@ -303,17 +304,34 @@ def test_stages_simulate_the_arm_named_by_model(tmp_path, small_arm, shipped, ca
         )
     model, model_hash = small_arm
     p = finetune.build_parser()
-    a = p.parse_args(["--translators", shipped, "--out", str(tmp_path / "o"), "--model", model])
+    argv = ["--translators", shipped, "--out", str(tmp_path / "o"), "--model", model]
+    a = p.parse_args([*argv, "--trust-unlabelled-translators"])
     stage = finetune.start_stage(p, a, "ccgan.finetune", {}, [])
     assert stage.arm_c.model_hash == stage.arm_s.model_hash == model_hash
     assert stage.arm_c.domain.name == "constrained" and stage.arm_s.domain.name == "source"
     assert stage.run["model"] == model and stage.run["model_hash"] == model_hash
+    assert stage.run["method"] == "finetune"
+    assert "--trust-unlabelled-translators" in usage_error(finetune.main, argv, capsys)
 
     tree, meta = checkpoint.load(shipped)
-    other = checkpoint.save(tmp_path / "other.ckpt", tree, meta | {"model_hash": "d" * 16})
-    argv = ["--translators", str(other), "--out", str(tmp_path / "o2"), "--model", model]
-    err = usage_error(finetune.main, argv, capsys)
-    assert "d" * 16 in err and model_hash in err
+    for name, labels, named in (
+        ("other_arm", labelled("ccgan", "constrained", "d" * 16), ["d" * 16, model_hash]),
+        ("other_domain", labelled("ccgan", "aged", model_hash), ["'aged'", "'constrained'"]),
+    ):
+        other = checkpoint.save(tmp_path / f"{name}.ckpt", tree, meta | labels)
+        argv = ["--translators", str(other), "--out", str(tmp_path / "o2"), "--model", model]
+        err = usage_error(distill.main, argv, capsys)
+        assert all(n in err for n in named) and not (tmp_path / "o2").exists()
+
+
+def labelled(method, target_domain, model_hash) -> dict:
+    """A translator file's labels (`ccgan.translator.LABELS`)."""
+    return {
+        "method": method,
+        "source_domain": "source",
+        "target_domain": target_domain,
+        "model_hash": model_hash,
+    }
 
 
 # ----------------------------------------------------------------------------- help
@@ -468,7 +486,7 @@ def test_changed_config_names_the_differing_fields(tmp_path):
 def test_forward_models_trained_once_serve_other_runs_only_when_they_fit(
     tmp_path, files, small_arm, capsys
 ):
-    model, _ = small_arm
+    model, h = small_arm
     data = ["--source", files["s"], "--constrained", files["c"], "--model", model, *TINY_TRAIN]
     forward_dir, run = tmp_path / "forward", tmp_path / "run"
     train_lib.main([*data, "--workdir", str(forward_dir), "--forward-only"])
@@ -490,6 +508,9 @@ def test_forward_models_trained_once_serve_other_runs_only_when_they_fit(
     assert copied == (forward_dir / "forward_c.ckpt").read_bytes()
     # The first seed's model is stored once: translator.ckpt names translator_seed0.ckpt.
     assert (run / "translator.ckpt").resolve() == (run / "translator_seed0.ckpt").resolve()
+    # Each file says what it is: the method, the data's domains and the arm.
+    _, meta = checkpoint.load(run / "translator.ckpt")
+    assert {k: meta[k] for k in translator_lib.LABELS} == labelled("ccgan", "constrained", h)
 
 
 def test_sigterm_stops_training_after_its_epoch_with_a_checkpoint(
@@ -527,3 +548,116 @@ def test_first_seed_link_replaces_a_copy_and_follows_the_seed(tmp_path):
         "translator.ckpt",
         "translator_seed3.ckpt",
     ]
+
+
+# ----------------------------------------------------------------------------- splits
+
+
+def test_training_refuses_validation_files_as_training_data_and_vice_versa(
+    tmp_path, files, small_arm, capsys
+):
+    """Files are concatenated and the last --n-val trajectories held out: a validation-split
+    file must come last and be what is held out; a training-split one must not be held out."""
+    model, h = small_arm
+    val = {
+        slot: write_dataset(tmp_path / f"{slot}_val.npz", domain, h, n=2, seed=5, split="val")
+        for slot, domain in (("s", "source"), ("c", "constrained"))
+    }
+    out = tmp_path / "run"
+    tiny = [*TINY_TRAIN, "--model", model, "--workdir", str(out), "--forward-only"]
+    for source, n_val, named in (
+        ([val["s"]], "2", "only validation-split"),  # the val file alone as training data
+        ([val["s"], files["s"]], "2", "comes before"),  # val first: trained on, train held out
+        ([files["s"], val["s"]], "3", "--n-val 2"),  # a training trajectory held out
+    ):
+        argv = ["--source", *source, "--constrained", files["c"], val["c"], *tiny, "--n-val", n_val]
+        err = usage_error(train_lib.main, argv, capsys)
+        assert "--source" in err and named in err and "val.npz (val)" in err
+        assert not out.exists()
+    argv = ["--source", val["s"], "--constrained", files["c"], "--n-trials", "1"]
+    argv += ["--storage", str(tmp_path / "t.db"), "--report-dir", str(tmp_path / "r")]
+    assert "only validation-split" in usage_error(tune.main, argv, capsys)
+    # Train then val, the whole val file held out: accepted, with no note.
+    d_s, d_c = data_lib.read_translation_files([files["s"], val["s"]], [files["c"], val["c"]])
+    assert data_lib.check_slot_splits(2, d_s, d_c) == []
+    assert d_s.splits == (("train", 4), ("val", 2))
+    # More validation trajectories than held out: they are trained on, and a note says so.
+    notes = data_lib.check_slot_splits(1, d_s, d_c)
+    assert len(notes) == 2 and notes[0].startswith("--source")
+    assert "the other 1 are trained on" in notes[0] and "--n-val 2" in notes[0]
+    # Training files alone: their last --n-val trajectories are held out, as before.
+    only_train = data_lib.read_translation_files([files["s"]], [files["c"]])
+    assert data_lib.check_slot_splits(3, *only_train) == []
+
+
+# ----------------------------------------------------------------------------- translator labels
+
+#: The committed CCGAN-GP of the I-Support arm (labelled, with F_c).
+COMMITTED = translator_lib.TRANSLATORS_DIR / "ccgan" / "translator.ckpt"
+
+
+def test_load_translator_refuses_what_it_was_not_told_to_expect(tmp_path):
+    """`load_translator(..., method=, target_domain=, model_hash=)`: another method, domain or
+    arm is refused naming both values; an unlabelled file only with trust_unlabelled."""
+    arm_hash = checkpoint.read(COMMITTED)[0]["model_hash"]
+    good = load_translator(
+        COMMITTED, method="ccgan", source_domain="source", target_domain="constrained"
+    )
+    assert good.k >= 1 and load_translator(COMMITTED, model_hash=arm_hash).k == good.k
+    for kwargs, named in (
+        ({"target_domain": "aged"}, ["'aged'", "'constrained'"]),
+        ({"method": "wcgan"}, ["'wcgan'", "'ccgan'"]),
+        ({"method": ("distill", "finetune")}, ["'distill' or 'finetune'", "'ccgan'"]),
+        ({"model_hash": "e" * 16}, ["e" * 16, arm_hash]),
+    ):
+        with pytest.raises(translator_lib.TranslatorMismatchError) as exc:
+            load_translator(COMMITTED, **kwargs)
+        assert all(n in str(exc.value) for n in named) and "translator.ckpt" in str(exc.value)
+    solid = SOLID_TRANSLATORS_DIR / "wcgan" / "translator.ckpt"
+    with pytest.raises(translator_lib.UnlabelledTranslatorError, match="trust_unlabelled"):
+        load_translator(solid)
+    assert load_translator(solid, trust_unlabelled=True, method="ccgan").k >= 1
+    # A label the file does record is checked even when trusted.
+    tree, meta = checkpoint.load(solid)
+    part = checkpoint.save(tmp_path / "part.ckpt", tree, meta | {"target_domain": "aged"})
+    with pytest.raises(translator_lib.TranslatorMismatchError, match="'aged'"):
+        load_translator(part, trust_unlabelled=True, target_domain="constrained")
+
+
+def test_rewrite_meta_keeps_the_payload(tmp_path):
+    path = checkpoint.save(tmp_path / "t.ckpt", {"w": np.arange(5.0)}, {"k": 5})
+    before = path.read_bytes()
+    out = checkpoint.rewrite_meta(path, {"method": "ccgan"})
+    assert out["meta"] == {"k": 5, "method": "ccgan"} and path.read_bytes() != before
+    tree, meta = checkpoint.load(path)
+    np.testing.assert_array_equal(tree["w"], np.arange(5.0))
+    assert meta == {"k": 5, "method": "ccgan"} and list(tmp_path.iterdir()) == [path]
+
+
+def test_fine_tune_stages_label_what_they_write(tmp_path):
+    """A distilled file is labelled as the stage's: its method, domain and arm."""
+    from ccgan.stage import Stage
+
+    tree, meta = checkpoint.load(COMMITTED)
+    run = {"method": "distill", "domain": "aged", "model_hash": "a" * 16}
+    stage = Stage([0], [(tree, meta)], [], None, None, tmp_path, run)
+    stage.write([tree["g_c"]], [{}], {}, "distill.json")
+    _, out = checkpoint.load(tmp_path / "translator.ckpt")
+    assert {k: out[k] for k in translator_lib.LABELS} == labelled("distill", "aged", "a" * 16)
+    assert out["finetune"]["method"] == "distill"
+
+
+def test_predict_poses_refuses_nan_and_kpa():
+    tr = load_translator(COMMITTED)
+    pose0 = np.array([0.0, 0.0, -0.2, 0.0, 0.0, 1.0])
+    commands = np.full((4, 3), 1.0)
+    assert tr.predict_poses(commands, pose0).shape == (4, 6)
+    for bad, match in (
+        (np.where(np.eye(4, 3), np.nan, 1.0), "non-finite"),
+        (commands * 100.0, "kPa"),
+        (commands[:, :2], r"\[T, 3\]"),
+    ):
+        with pytest.raises(ValueError, match=match):
+            tr.predict_poses(bad, pose0)
+    with pytest.raises(ValueError, match="pose0"):
+        tr.predict_poses(commands, np.full(6, np.nan))

@@ -65,6 +65,7 @@ def test_tiny_end_to_end(small_xml, tmp_path, capsys):
         seeds=(0, 1),
         ccgan_path=str(shipped),
         wcgan_path=str(tmp_path / "wcgan" / "translator.ckpt"),
+        trust_unlabelled_translators=True,
         duration_s=2.0,
         hold_factors=(1, 2),
         validation_duration_s=1.0,
@@ -127,14 +128,19 @@ def test_translator_per_trained_seed(tmp_path):
     for name in ("translator.ckpt", "translator_seed0.ckpt", "translator_seed1.ckpt"):
         shutil.copy(shipped, tmp_path / name)
     path = str(tmp_path / "translator.ckpt")
-    two = methods.load_translator("ccgan", pipeline.EvalConfig(seeds=(0, 1), ccgan_path=path))[0]
+    trust = {"trust_unlabelled_translators": True}  # the solid-disc arm's files have no labels
+    two = methods.load_translator(
+        "ccgan", pipeline.EvalConfig(seeds=(0, 1), ccgan_path=path, **trust)
+    )[0]
     assert sorted(two.trained_seeds) == [0, 1] and two.takes_seed
     p_s = np.full((4, 3), 1.0)
     rest = np.tile([0.0, 0.0, -0.2, 0.0, 0.0, 1.0], (4, 1))  # tip (m), unit d3
     commands, k = two.translate(p_s, rest, seed=1)
     assert commands.shape == (4 * k, 3)
     # A seed without its own model: the single checkpoint serves every seed.
-    three = methods.load_translator("ccgan", pipeline.EvalConfig(seeds=(0, 1, 2), ccgan_path=path))
+    three = methods.load_translator(
+        "ccgan", pipeline.EvalConfig(seeds=(0, 1, 2), ccgan_path=path, **trust)
+    )
     assert three[0].trained_seeds == {}
 
 
@@ -146,10 +152,11 @@ def test_default_translator_finds_its_trained_seeds(tmp_path, monkeypatch):
     for name in ("translator.ckpt", "translator_seed0.ckpt", "translator_seed1.ckpt"):
         shutil.copy(shipped, tmp_path / name)
     monkeypatch.setenv("CCGAN_TRANSLATOR", str(tmp_path / "translator.ckpt"))
-    tr, why = methods.load_translator("ccgan", pipeline.EvalConfig(seeds=(0, 1)))
+    trust = {"trust_unlabelled_translators": True}  # the solid-disc arm's files have no labels
+    tr, why = methods.load_translator("ccgan", pipeline.EvalConfig(seeds=(0, 1), **trust))
     assert sorted(tr.trained_seeds) == [0, 1], why
     monkeypatch.delenv("CCGAN_TRANSLATOR")
-    tr, _ = methods.load_translator("ccgan", pipeline.EvalConfig(seeds=(0, 1, 2)))
+    tr, _ = methods.load_translator("ccgan", pipeline.EvalConfig(seeds=(0, 1, 2), **trust))
     committed = shipped.parent / "translator_seed2.ckpt"
     assert bool(tr.trained_seeds) == committed.exists()
 

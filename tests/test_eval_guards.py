@@ -28,6 +28,16 @@ ROOT = Path(__file__).resolve().parent.parent
 SHIPPED = ROOT / "results" / "solid" / "translators" / "ccgan" / "translator.ckpt"
 
 
+def _labels(method, target_domain, model_hash) -> dict:
+    """What a translator file records of itself (`ccgan.translator.LABELS`)."""
+    return {
+        "method": method,
+        "source_domain": "source",
+        "target_domain": target_domain,
+        "model_hash": model_hash,
+    }
+
+
 def _file_hash(path) -> str:
     """The model hash `mjx_arm.load` gives a file: sha256 of its text, first 16 hex digits."""
     return hashlib.sha256(Path(path).read_text().encode()).hexdigest()[:16]
@@ -272,7 +282,7 @@ def test_wcgan_default_path_never_calls_the_loader_with_kind(tmp_path, monkeypat
     monkeypatch.setattr(ccgan, "load_translator", spy)
     default = tmp_path / "wcgan" / "translator.ckpt"
     monkeypatch.setattr(methods, "WCGAN_DEFAULT_PATH", default)
-    cfg = pipeline.EvalConfig(seeds=(0, 1))
+    cfg = pipeline.EvalConfig(seeds=(0, 1), trust_unlabelled_translators=True)
     tr, why = methods.load_translator("wcgan", cfg)
     assert tr is None and calls == [] and str(default) in why
     default.parent.mkdir()
@@ -294,7 +304,7 @@ def test_translators_trained_on_another_arm_are_refused(small_xml, tmp_path, mon
     tree, meta = checkpoint.load(SHIPPED)
     small_hash = hashlib.sha256(small_xml.encode()).hexdigest()[:16]
     for name, recorded in (("other.ckpt", "0123456789abcdef"), ("same.ckpt", small_hash)):
-        checkpoint.save(tmp_path / name, tree, meta | {"model_hash": recorded})
+        checkpoint.save(tmp_path / name, tree, meta | _labels("ccgan", "constrained", recorded))
     cfg = pipeline.EvalConfig(
         shapes=("circle",),
         methods=("none", "ccgan"),
@@ -356,3 +366,105 @@ def test_importing_eval_leaves_mujoco_gl_to_mjx_arm():
     )
     assert out.returncode == 0, out.stderr
     assert "MUJOCO_GL=None" in out.stdout.splitlines()
+
+
+def _translator_run(small_xml, tmp_path, **kw):
+    """A one-shape, half-second evaluation on the small arm that writes nothing but tmp_path."""
+    return pipeline.EvalConfig(
+        shapes=("circle",),
+        seeds=(0,),
+        duration_s=0.5,
+        hold_factors=(1,),
+        validation_duration_s=0.5,
+        robustness=False,
+        plots=False,
+        xml=small_xml,
+        out_dir=str(tmp_path / "out"),
+        **kw,
+    )
+
+
+@pytest.mark.parametrize(
+    "method, recorded, target, wanted, found",
+    [
+        # The D_c-trained CCGAN-GP scored on the aged arm (eval.shapes --target-domain aged).
+        ("ccgan", ("ccgan", "constrained"), "aged", "'aged'", "'constrained'"),
+        # The aged pair's translator scored on D_c.
+        ("ccgan", ("ccgan", "aged"), "constrained", "'constrained'", "'aged'"),
+        # A WCGAN-GP file given as --ccgan-path, and the other way round.
+        ("ccgan", ("wcgan", "constrained"), "constrained", "'ccgan'", "'wcgan'"),
+        ("wcgan", ("ccgan", "constrained"), "constrained", "'wcgan'", "'ccgan'"),
+        # A translator as trained given as the one distilled in the simulator.
+        ("ccgan_sim", ("ccgan", "constrained"), "constrained", "'distill'", "'ccgan'"),
+    ],
+)
+def test_translators_labelled_for_another_method_or_domain_are_refused(
+    small_xml, tmp_path, monkeypatch, method, recorded, target, wanted, found
+):
+    """The wrong-exit-0 cases of issue 32: refused before any work, naming both values."""
+    from ccgan import checkpoint
+
+    monkeypatch.delenv("CCGAN_TRANSLATOR", raising=False)
+    tree, meta = checkpoint.load(SHIPPED)
+    small_hash = hashlib.sha256(small_xml.encode()).hexdigest()[:16]
+    path = checkpoint.save(tmp_path / "t.ckpt", tree, meta | _labels(*recorded, small_hash))
+    cfg = _translator_run(
+        small_xml,
+        tmp_path,
+        methods=("none", method),
+        target_domain=target,
+        **{f"{method}_path": str(path)},
+    )
+    with pytest.raises(methods.TranslatorError) as exc:
+        pipeline.evaluate(cfg, command="test", log=lambda *_: None)
+    message = str(exc.value)
+    key = "target_domain" if recorded[0] == methods.FILE_METHODS[method][0] else "method"
+    assert f"expects {key} {wanted}" in message and f"the file has {found}" in message
+    assert "t.ckpt" in message and methods.PATH_FLAGS[method] in message
+    assert not (tmp_path / "out").exists()
+    # Labelled as what it is scored as, the same file runs.
+    right = _labels(methods.FILE_METHODS[method][0], target, small_hash)
+    checkpoint.save(path, tree, meta | right)
+    assert method in pipeline.evaluate(cfg, command="test", log=lambda *_: None)["methods_run"]
+
+
+def test_unlabelled_translators_need_the_trust_flag(small_xml, tmp_path, monkeypatch):
+    """The solid-disc arm's files record no labels: refused (here on the small arm, and from the
+    command line on the I-Support arm) unless --trust-unlabelled-translators is given."""
+    monkeypatch.delenv("CCGAN_TRANSLATOR", raising=False)
+    cfg = _translator_run(small_xml, tmp_path, methods=("none", "ccgan"), ccgan_path=str(SHIPPED))
+    with pytest.raises(methods.TranslatorError, match="--trust-unlabelled-translators"):
+        pipeline.evaluate(cfg, command="test", log=lambda *_: None)
+    assert not (tmp_path / "out").exists()
+    trusted = dataclasses.replace(cfg, trust_unlabelled_translators=True)
+    data = pipeline.evaluate(trusted, command="test", log=lambda *_: None)
+    assert "ccgan" in data["methods_run"]
+    argv = ["--methods", "none", "ccgan", "--ccgan-path", str(SHIPPED), "--shapes", "circle"]
+    argv += ["--duration", "0.5", "--out", str(tmp_path / "cli")]
+    with pytest.raises(SystemExit) as exc:
+        shapes.main(argv)
+    assert "does not record its method" in str(exc.value) and "solid" in str(exc.value)
+    assert not (tmp_path / "cli").exists()
+    assert shapes.parse_args([*argv, "--trust-unlabelled-translators"]).trust_unlabelled_translators
+
+
+@pytest.mark.parametrize(
+    "target, paths",
+    [
+        ("constrained", {"ccgan": "ccgan", "wcgan": "wcgan", "ccgan_sim": "ccgan_sim"}),
+        ("aged", {"ccgan": "aged", "ccgan_sim": "aged_sim"}),
+    ],
+)
+def test_committed_translators_are_labelled_for_their_stage(target, paths):
+    """Every committed I-Support translator says what it is, and loads as the chain's table
+    stages give it (their --*-path and --target-domain), with no trust flag."""
+    from ccgan import label_translators
+
+    run = ROOT / "results" / "paper" / "run"
+    assert label_translators.label_run(run, check=True) == {}
+    arm_hash = _file_hash(label_translators.RUN_MODEL)
+    given = {f"{m}_path": str(run / folder / "translator.ckpt") for m, folder in paths.items()}
+    cfg = pipeline.EvalConfig(seeds=(0, 1, 2), target_domain=target, **given)
+    for method in paths:
+        tr, why = methods.load_translator(method, cfg)
+        assert tr.model_hashes == {arm_hash} and sorted(tr.trained_seeds) == [0, 1, 2], why
