@@ -32,8 +32,10 @@ from mjx_arm.machine import usable_cores
 #: A trajectory whose joint speed exceeds this (rad/s or m/s) is treated as diverged.
 MAX_JOINT_SPEED = 1.0e3
 #: Trajectories per MuJoCo C `mujoco.rollout` call in `Arm.rollout`: each call holds every
-#: substep's full state of a 5 s slice ([chunk, 1250, nstate] float64, about 1.65 MB per
-#: trajectory for the 20-segment arm), so 256 bound it near 0.4 GB while still filling every core.
+#: substep's full state of a 5 s slice ([chunk, 1250, nstate] float64, with its copies and the
+#: controls). Measured peak: 2.6 MB per trajectory for the 20-segment arm, 0.67 GB for a chunk
+#: of 256 (`python -m bench.c_chunk_memory`, bench/results/cpu/c_chunk_memory.md); 256 still
+#: fills every core.
 C_CHUNK = 256
 #: A rest state still moving faster than this (rad/s or m/s) after `_settle`'s time is unsettled.
 SETTLED_SPEED = 1.0e-3
@@ -552,7 +554,9 @@ def load(
       ModelValidationError: the path is not an MJCF text file, the MJCF does not parse or
         compile, does not name the chamber actuators and the tip site, its options do not suit
         the API, or its <custom> valve numerics are unusable (tau <= 0, p_min < 0,
-        p_min >= p_max, or p_max above the actuators' ctrlrange, which would clip it).
+        p_min >= p_max, or p_max above the actuators' ctrlrange, which would clip it), or its
+        timestep is not positive; a domain that takes the model's constrained medium
+        (viscosity_scale=None) when the MJCF records none (pass a `Domain` with a scale).
       SimulationDivergedError: the arm has no stable rest in the domain (diverges, keeps moving,
         or rests absurdly far away), e.g. with a `Domain.inertia_scale` too small for the
         timestep; the message names the scale.
@@ -560,7 +564,8 @@ def load(
     domain = domains.resolve(domain)
     mj_model, model_path, source, text = checks.read_model(path, xml)
     validate_model(mj_model, source)
-    inertia_scale = domains.apply(mj_model, domain)
+    solid = constants.SOLID_MODEL_PATH.is_file() and text == constants.SOLID_MODEL_PATH.read_text()
+    inertia_scale = domains.apply(mj_model, domain, source, solid)
     mujoco.mj_setConst(mj_model, mujoco.MjData(mj_model))
     valve_params = checks.valve_params(mj_model, source)
     rest_qpos, rest_qvel, problem = _settle(mj_model, valve_params.p_min_bar)

@@ -46,6 +46,12 @@ def validate_model(mj_model: mujoco.MjModel, source: str = "model") -> None:
             f" chamber actuators {list(constants.CHAMBER_ACTUATORS)} and the tip site"
             f" {constants.TIP_SITE!r}."
         )
+    if not mj_model.opt.timestep > 0:
+        raise ModelValidationError(
+            f"{source}: timestep {mj_model.opt.timestep} s must be positive (each step moves"
+            f" time forward); give <option timestep> > 0 that divides the"
+            f" {constants.CONTROL_PERIOD_S} s control period"
+        )
     period = constants.CONTROL_PERIOD_S / mj_model.opt.timestep
     if abs(period - round(period)) > 1e-6:
         raise ModelValidationError(

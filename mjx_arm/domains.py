@@ -75,11 +75,27 @@ def resolve(domain: str | Domain) -> Domain:
         raise ValueError(f"unknown domain {domain!r}; built-in: {sorted(DOMAINS)}") from None
 
 
-def model_viscosity_scale(mj_model: mujoco.MjModel) -> float:
-    """The constrained medium's viscosity over the source's, as the model records it."""
+def model_viscosity_scale(
+    mj_model: mujoco.MjModel, source: str = "the MJCF", solid: bool = False
+) -> float:
+    """The constrained medium's viscosity over the source's, as the model records it.
+
+    The committed solid-disc arm (`solid`), whose file predates the numeric, takes its fit's.
+
+    Raises:
+      ModelValidationError: another model that records none: its constrained medium is unknown.
+    """
     stored = checks.custom_numeric(mj_model, constants.CUSTOM_CONSTRAINED_SCALE, math.nan)
-    if math.isnan(stored):
+    if math.isnan(stored) and solid:
         return fitted.load_fit(fitted.FIT_PATHS["solid"])["constrained_viscosity_scale"]
+    if math.isnan(stored):
+        raise checks.ModelValidationError(
+            f"{source} records no constrained medium (<custom><numeric"
+            f' name="{constants.CUSTOM_CONSTRAINED_SCALE}">), so a domain with'
+            " viscosity_scale=None has no scale to take: pass a mjx_arm.Domain with"
+            " viscosity_scale (or viscosity) set, e.g. mjx_arm.Domain(name='constrained',"
+            " viscosity_scale=20.0)"
+        )
     return stored
 
 
@@ -122,8 +138,11 @@ def spring_frequency_rad_per_s(mj_model: mujoco.MjModel) -> float:
     return max(frequencies)
 
 
-def apply(mj_model: mujoco.MjModel, domain: Domain) -> float:
-    """Edits `mj_model` in place to put it in `domain`.
+def apply(
+    mj_model: mujoco.MjModel, domain: Domain, source: str = "the MJCF", solid: bool = False
+) -> float:
+    """Edits `mj_model` in place to put it in `domain` (`source`, `solid`: as
+    `model_viscosity_scale`).
 
     Returns:
       The inertia scale applied (1.0 when none).
@@ -132,7 +151,9 @@ def apply(mj_model: mujoco.MjModel, domain: Domain) -> float:
     if domain.viscosity is not None:
         m.opt.viscosity = domain.viscosity
     m.opt.viscosity *= (
-        model_viscosity_scale(m) if domain.viscosity_scale is None else (domain.viscosity_scale)
+        model_viscosity_scale(m, source, solid)
+        if domain.viscosity_scale is None
+        else (domain.viscosity_scale)
     )
     if m.opt.viscosity <= 0 and m.opt.density <= 0:
         raise ValueError("the domain's medium has zero viscosity and density: MJX drops fluid code")

@@ -141,3 +141,31 @@ def test_valve_check_lists_every_problem():
     for part in ("tau_rise_s = nan is not finite", "tau_drop_s = 0 s", "below p_max_bar", "0.5"):
         assert part in str(err.value)
     assert valve.check(valve.ValveParams(), ctrl_range=(0.0, 3.5)) == valve.ValveParams()
+
+
+@pytest.mark.parametrize("timestep", ["-0.004", "0"])
+def test_a_timestep_that_is_not_positive_is_named_by_its_sign(small_xml, timestep):
+    xml, n = re.subn(r'timestep="[^"]*"', f'timestep="{timestep}"', small_xml)
+    assert n == 1
+    with pytest.raises(mjx_arm.ModelValidationError, match="must be positive") as exc:
+        mjx_arm.load(xml=xml)
+    assert "lower the timestep" not in str(exc.value)
+
+
+def test_an_mjcf_without_its_constrained_medium_needs_a_domain(small_xml):
+    """Without <custom> constrained_viscosity_scale the constrained and aged domains have no
+    scale: refused (never the solid-disc arm's); a Domain with a scale, or the source, loads."""
+    bare, n = re.subn(r'\s*<numeric name="constrained_viscosity_scale"[^>]*/>', "", small_xml)
+    assert n == 1
+    for domain in ("constrained", "aged"):
+        with pytest.raises(mjx_arm.ModelValidationError, match="pass a mjx_arm.Domain"):
+            mjx_arm.load(xml=bare, domain=domain)
+    source = mjx_arm.load(xml=bare)
+    arm = mjx_arm.load(xml=bare, domain=mjx_arm.Domain(name="c", viscosity_scale=20.0))
+    assert arm.mj_model.opt.viscosity == pytest.approx(20.0 * source.mj_model.opt.viscosity)
+    # The committed solid-disc arm predates the numeric and keeps its fitted medium.
+    solid = mjx_arm.load(mjx_arm.constants.SOLID_MODEL_PATH, domain="constrained")
+    assert (
+        solid.mj_model.opt.viscosity
+        > mjx_arm.load(mjx_arm.constants.SOLID_MODEL_PATH).mj_model.opt.viscosity
+    )

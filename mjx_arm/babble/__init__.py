@@ -138,6 +138,74 @@ class BabbleConfig:
 #: The paper's data: 50 training and 3 validation trajectories of 60 s in each domain.
 PAPER = BabbleConfig()
 
+#: Host memory of one MuJoCo C rollout chunk per trajectory (bytes): 2.6 MB measured for the
+#: 20-segment arm (bench/results/cpu/c_chunk_memory.md), with a margin.
+C_BYTES_PER_TRAJECTORY = 3_000_000
+#: Fraction of the available memory a run may plan to use: the rest is for Python, JAX, MuJoCo
+#: and the temporaries the estimate leaves out.
+MEMORY_FRACTION = 0.8
+
+
+class NotEnoughMemoryError(ValueError):
+    """A babbling run would not fit the machine's available memory (`check_memory`)."""
+
+
+def memory_estimate_bytes(config: BabbleConfig) -> int:
+    """Host memory a run of `config` needs at its peak (bytes), before any work.
+
+    Every (domain, split) dataset is kept until the end ([n, T, 3] programs and [n, T, 6] poses,
+    float32); the largest split's arrays once more while they are made and written; one MuJoCo
+    C chunk (`C_BYTES_PER_TRAJECTORY`) or, with MJX, one chunk's poses brought to the host.
+    """
+    per_trajectory = config.n_steps * (3 + arm_lib.POSE_DIM) * 4
+    splits = config.splits()
+    kept = len(config.domains) * sum(splits.values()) * per_trajectory
+    chunk = min(config.chunk, max(splits.values()))
+    return int(kept + max(splits.values()) * per_trajectory + chunk * C_BYTES_PER_TRAJECTORY)
+
+
+def available_memory_bytes() -> int | None:
+    """Memory this process may still take (bytes): Linux's MemAvailable, capped by a cgroup
+    limit (a container's or a cluster job's) less its usage; None where neither is known."""
+    found = []
+    try:
+        for line in Path("/proc/meminfo").read_text().splitlines():
+            if line.startswith("MemAvailable:"):
+                found.append(int(line.split()[1]) * 1024)
+    except (OSError, ValueError, IndexError):
+        pass
+    try:
+        limit = Path("/sys/fs/cgroup/memory.max").read_text().strip()
+        used = Path("/sys/fs/cgroup/memory.current").read_text().strip()
+        if limit != "max":
+            found.append(int(limit) - int(used))
+    except (OSError, ValueError):
+        pass
+    return min(found) if found else None
+
+
+def check_memory(config: BabbleConfig, available: int | None = None) -> int:
+    """Refuses a run whose `memory_estimate_bytes` exceeds MEMORY_FRACTION of the available
+    memory (`available_memory_bytes` unless given); returns the estimate.
+
+    Raises:
+      NotEnoughMemoryError: naming the estimate, the memory available and what fits.
+    """
+    need = memory_estimate_bytes(config)
+    available = available_memory_bytes() if available is None else available
+    if available is not None and need > MEMORY_FRACTION * available:
+        per = need / max(1, len(config.domains) * sum(config.splits().values()))
+        fits = int(MEMORY_FRACTION * available / per)
+        raise NotEnoughMemoryError(
+            f"{len(config.domains)} domain(s) x {sum(config.splits().values())} trajectories of"
+            f" {config.duration_s:g} s need about {need / 1e9:.3g} GB of memory, but"
+            f" {available / 1e9:.3g} GB are available ({MEMORY_FRACTION:.0%} of it may be"
+            f" planned): about {fits // len(config.domains)} trajectories per domain fit; babble"
+            " fewer (--n, --n-val) or"
+            " shorter ones (--duration), or in several runs with other --seed values"
+        )
+    return need
+
 
 # ---------------------------------------------------------------------------------- rollouts
 
@@ -369,9 +437,13 @@ def babble(
     Returns:
       One `Dataset` per (domain, split), in order, all with the same task-space bounds (min/max
       over every returned dataset's poses).
+
+    Raises:
+      NotEnoughMemoryError: the run would not fit the available memory (`check_memory`).
     """
     from tqdm.auto import tqdm
 
+    check_memory(config)  # before any work: a run that cannot fit fails now, not after hours
     splits = config.splits()
     total = len(config.domains) * sum(splits.values())
     results = []

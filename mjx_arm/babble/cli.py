@@ -20,7 +20,15 @@ from pathlib import Path
 import jax
 
 from mjx_arm import dataset, domains, machine
-from mjx_arm.babble import BACKENDS, C_MAX_CHUNK, PAPER, BabbleConfig, run
+from mjx_arm.babble import (
+    BACKENDS,
+    C_MAX_CHUNK,
+    PAPER,
+    BabbleConfig,
+    NotEnoughMemoryError,
+    check_memory,
+    run,
+)
 
 
 def _int_at_least(low: int):
@@ -177,6 +185,10 @@ def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
     try:
         check_distributed_args(args)
     except ValueError as err:
+        p.error(str(err))
+    try:
+        check_memory(args.config)
+    except NotEnoughMemoryError as err:
         p.error(str(err))
     if args.model is not None and not Path(args.model).is_file():
         p.error(f"--model {args.model}: no such MJCF file")
