@@ -16,6 +16,7 @@ import re
 import textwrap
 from pathlib import Path
 
+from mjx_arm import run_folder
 from tracking.config import ConfigError
 
 
@@ -162,6 +163,22 @@ def check_output_dir(parser: argparse.ArgumentParser, flag: str, path) -> None:
     for part in (Path(path), *Path(path).parents):
         if part.exists() and not part.is_dir():
             parser.error(f"{flag} {path}: {part} exists and is not a folder")
+
+
+def lock_output_dir(parser: argparse.ArgumentParser, flag: str, path):
+    """`check_output_dir`, then this process's lock on the folder until it ends (the lock file
+    beside it: the folder holds only what the command writes); another live writer of the same
+    folder is a usage error naming its pid (`mjx_arm.run_folder`).
+
+    Returns:
+      The held `mjx_arm.run_folder.FolderLock`.
+    """
+    check_output_dir(parser, flag, path)
+    try:
+        run_folder.check_writable_folder(path)
+        return run_folder.lock_folder(path, beside=True)
+    except (OSError, run_folder.FolderBusyError) as err:
+        parser.error(f"{flag}: {err}")
 
 
 def add_data_flags(parser: argparse.ArgumentParser) -> None:

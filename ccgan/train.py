@@ -32,10 +32,10 @@ from ccgan import checkpoint
 from ccgan.cli import (
     add_config_flags,
     add_data_flags,
-    check_output_dir,
     cli_parser,
     config_from_args,
     data_from_args,
+    lock_output_dir,
 )
 from ccgan.config import (
     FEEDBACK_IMPLS,
@@ -449,7 +449,7 @@ def main(argv=None) -> None:
     )
     if len(set(args.seeds)) != len(args.seeds):
         parser.error(f"--seeds must be distinct, got {args.seeds}")
-    check_output_dir(parser, "--workdir", args.workdir)
+    lock_output_dir(parser, "--workdir", args.workdir)  # one trainer per workdir
     d_s, d_c = data_from_args(parser, args)
     try:
         split_notes = data_lib.check_slot_splits(config.n_val, d_s, d_c)

@@ -14,14 +14,24 @@ users of `eval.shapes`.
 from __future__ import annotations
 
 import argparse
+import json
 import sys
 import time
+from pathlib import Path
 
 from ccgan.cli import HelpFormatter
 from ccgan.translator import TRUST_FLAG
 from eval.methods import DEFAULT_METHODS, METHODS, PATH_FLAGS, TranslatorError
-from eval.pipeline import RESULTS_DIR, RUNS_DIR, EvalConfig, default_methods, evaluate, quick
-from mjx_arm import programs
+from eval.pipeline import (
+    RESULTS_DIR,
+    RUNS_DIR,
+    EvalConfig,
+    default_methods,
+    evaluate,
+    is_main_job,
+    quick,
+)
+from mjx_arm import programs, run_folder
 from mjx_arm.programs import (
     AMPLITUDE_BAR,
     CHAMBER_ANGLES_RAD,
@@ -268,6 +278,11 @@ def parse_args(argv: list[str] | None = None) -> EvalConfig:
     a usage error naming its flag, before any work."""
     p = build_parser()
     a = p.parse_args(argv)
+    if a.out is not None:
+        try:
+            run_folder.check_writable_folder(a.out)
+        except OSError as err:
+            p.error(f"--out: {err}")
     methods = default_methods() if a.methods is None else a.methods
     horizon = None if a.oracle_horizon is not None and a.oracle_horizon <= 0 else a.oracle_horizon
     try:
@@ -308,19 +323,58 @@ def parse_args(argv: list[str] | None = None) -> EvalConfig:
 
 def main(argv: list[str] | None = None) -> dict:
     """Thin entry point: parse flags, evaluate, print the wall time. A translator checkpoint
-    that does not load ends the run with an error (exit status 1) before any work."""
+    that does not load ends the run with an error (exit status 1) before any work.
+
+    A folder named by --out (or results/ for the main job) has one writer at a time: a second
+    is a usage error naming the first's pid (`mjx_arm.run_folder`). A run into a folder that
+    holds an earlier run's shapes.json removes, once its own report is written, the figures and
+    videos listed there that it did not write again (other shapes, no --render), so no stale
+    plot stays beside the new report; other files (the resume caches) are left as they are.
+    """
     from mjx_arm.machine import enable_compilation_cache
 
     cfg = parse_args(argv)
-    enable_compilation_cache()
-    command = "python -m eval.shapes " + " ".join(sys.argv[1:] if argv is None else argv)
-    t0 = time.perf_counter()
+    folder = cfg.out_dir
+    if folder is None and is_main_job(cfg):
+        folder = RESULTS_DIR
+    lock = None
+    if folder is not None:
+        try:  # the lock file beside the folder: the folder holds only what a run writes
+            lock = run_folder.lock_folder(folder, beside=True)
+        except run_folder.FolderBusyError as err:
+            build_parser().error(f"--out: {err}")
     try:
-        results = evaluate(cfg, command=command.strip())
-    except TranslatorError as err:
-        raise SystemExit(f"python -m eval.shapes: error: {err}") from None
-    print(f"total wall time: {time.perf_counter() - t0:.1f} s")
+        earlier = _listed_outputs(folder)
+        enable_compilation_cache()
+        command = "python -m eval.shapes " + " ".join(sys.argv[1:] if argv is None else argv)
+        t0 = time.perf_counter()
+        try:
+            results = evaluate(cfg, command=command.strip())
+        except TranslatorError as err:
+            raise SystemExit(f"python -m eval.shapes: error: {err}") from None
+        stale = sorted(earlier - _listed_outputs(folder))
+        for name in stale:
+            (Path(folder) / name).unlink(missing_ok=True)
+        if stale:
+            print(f"removed the earlier run's {', '.join(stale)} (not made by this run)")
+        print(f"total wall time: {time.perf_counter() - t0:.1f} s")
+    finally:
+        if lock is not None:
+            lock.release()
     return results
+
+
+def _listed_outputs(folder) -> set[str]:
+    """The figures and videos that the run in `folder` (its shapes.json) lists; none when there
+    is no readable shapes.json."""
+    try:
+        written = json.loads((Path(folder) / "shapes.json").read_text())
+    except (TypeError, OSError, ValueError):
+        return set()
+    if not isinstance(written, dict):
+        return set()
+    names = [*(written.get("figures") or []), *(written.get("videos") or [])]
+    return {n for n in names if isinstance(n, str) and n and Path(n).name == n}
 
 
 if __name__ == "__main__":

@@ -17,6 +17,7 @@ import json
 from pathlib import Path
 
 from mjx_arm.atomic import write_atomically
+from mjx_arm.run_folder import check_writable_folder
 
 
 def _held_out(folder: Path) -> tuple[str, list[float]] | None:
@@ -36,6 +37,22 @@ def _held_out(folder: Path) -> tuple[str, list[float]] | None:
     return None
 
 
+class ManifestError(ValueError):
+    """A stage.json that is not a stage's manifest (no "files" of output hashes)."""
+
+
+def _files(path: Path) -> dict:
+    """{output file: sha256} of a stage's manifest; a missing or unreadable one raises
+    ManifestError naming the file."""
+    try:
+        files = json.loads(path.read_text()).get("files")
+    except (OSError, UnicodeDecodeError, ValueError, AttributeError) as err:
+        raise ManifestError(f"{path} is not a stage manifest: {err}") from err
+    if not isinstance(files, dict):
+        raise ManifestError(f'{path} has no "files" (the sha256 of each output): not a manifest')
+    return files
+
+
 def compare(first: Path, second: Path) -> list[str]:
     """Markdown lines: per stage present in both, the outputs with equal and differing hashes,
     and the held-out numbers of each run."""
@@ -50,9 +67,7 @@ def compare(first: Path, second: Path) -> list[str]:
         p.parent.name for p in second.glob("*/stage.json") if (first / p.parent.name).is_dir()
     )
     for name in names:
-        files = [
-            json.loads((run / name / "stage.json").read_text())["files"] for run in (first, second)
-        ]
+        files = [_files(run / name / "stage.json") for run in (first, second)]
         shared = sorted(set(files[0]) & set(files[1]) - {"stage.log"})
         same = [f for f in shared if files[0][f] == files[1][f]]
         differ = [f for f in shared if files[0][f] != files[1][f]]
@@ -79,9 +94,20 @@ def main(argv: list[str] | None = None) -> None:
     for folder in (args.first, args.second):
         if not any(folder.glob("*/stage.json")):
             parser.error(f"{folder}: no stage folder with a stage.json")
-    text = "\n".join(compare(args.first, args.second)) + "\n"
+    if args.out is not None:
+        if args.out.is_dir():
+            parser.error(f"--out {args.out} is a folder; name a file")
+        try:
+            check_writable_folder(args.out.parent)
+        except OSError as err:
+            parser.error(f"--out: {err}")
+    try:
+        text = "\n".join(compare(args.first, args.second)) + "\n"
+    except ManifestError as err:
+        parser.error(str(err))
     print(text, end="")
     if args.out is not None:
+        args.out.parent.mkdir(parents=True, exist_ok=True)
         write_atomically(args.out, lambda f: f.write(text.encode()))
 
 

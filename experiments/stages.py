@@ -581,8 +581,8 @@ def has_manifest(chain: Chain, name: str) -> bool:
 
 
 def _not_current(chain: Chain, name: str) -> str | None:
-    """Why a stage with a manifest cannot be used as it is (None: it can): what a plain run
-    would refuse when it came to it."""
+    """Why a stage's folder cannot be used as it is (None: it can, or there is none yet): what
+    a plain run would refuse when it came to it."""
     try:
         status = chain.status(name)
     except StageError as err:
@@ -590,6 +590,14 @@ def _not_current(chain: Chain, name: str) -> str | None:
     if status == "stale":
         return "made from other inputs (the config or an upstream stage's outputs changed)"
     return None
+
+
+def _not_done(chain: Chain, name: str) -> str | None:
+    """Why a stage cannot be read as it is (None: it is done, current and whole)."""
+    why = _not_current(chain, name)
+    if why is None and chain.status(name) != "done":
+        why = "has not finished"
+    return why
 
 
 def check_before_running(chain: Chain, names, redo=()) -> None:
@@ -610,10 +618,10 @@ def check_before_running(chain: Chain, names, redo=()) -> None:
     problems = []
     for name in upstream(chain, names):
         if name not in names:
-            why = _not_current(chain, name)
+            why = _not_done(chain, name)
             if why is not None:
                 readers = [n for n in names if name in upstream(chain, [n])]
-                problems.append((name, f"{why}; {', '.join(readers)} read(s) it"))
+                problems.append((name, f"{why} (read by {', '.join(readers)})"))
     for name in names:
         inputs_done = all(
             n not in redo and has_manifest(chain, n) for n in chain.stages[name].inputs

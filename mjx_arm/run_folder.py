@@ -40,6 +40,7 @@ class FolderLock:
     def release(self) -> None:
         if self._fd is None:
             return
+        _HELD.pop(self.path, None)
         with contextlib.suppress(OSError):
             self.path.unlink()  # while still held: no one can lock this file after us
         os.close(self._fd)
@@ -53,6 +54,9 @@ class FolderLock:
 
     def __exit__(self, *exc) -> None:
         self.release()
+
+
+_HELD: dict[Path, FolderLock] = {}  # the locks this process holds, by lock file
 
 
 def _holder(path: Path) -> str:
@@ -72,7 +76,8 @@ def lock_folder(folder: str | os.PathLike, beside: bool = False) -> FolderLock:
       beside: keep the lock file next to the folder rather than in it (`lock_path`).
 
     Returns:
-      The held lock.
+      The held lock; the one this process holds already, if it does (a command's `main` called
+      again in one process, as tests do, is the same owner).
 
     Raises:
       FolderBusyError: another process holds it (the message names the folder and its pid).
@@ -81,6 +86,9 @@ def lock_folder(folder: str | os.PathLike, beside: bool = False) -> FolderLock:
     path = lock_path(folder, beside)
     made = [p for p in (path.parent, *path.parent.parents) if not p.exists()]
     path.parent.mkdir(parents=True, exist_ok=True)
+    path = path.parent.resolve() / path.name
+    if path in _HELD:
+        return _HELD[path]
     while True:
         fd = os.open(path, os.O_RDWR | os.O_CREAT | os.O_CLOEXEC, 0o666)
         try:
@@ -101,6 +109,7 @@ def lock_folder(folder: str | os.PathLike, beside: bool = False) -> FolderLock:
     os.ftruncate(fd, 0)
     os.write(fd, f"{os.getpid()}\n".encode())
     lock = FolderLock(folder, path, fd, made)
+    _HELD[path] = lock
     atexit.register(lock.release)
     return lock
 

@@ -19,7 +19,7 @@ from pathlib import Path
 
 import jax
 
-from mjx_arm import dataset, domains, machine
+from mjx_arm import dataset, domains, machine, run_folder
 from mjx_arm.babble import (
     BACKENDS,
     C_MAX_CHUNK,
@@ -258,9 +258,19 @@ def main(argv: Sequence[str] | None = None) -> int:
             num_processes=args.num_processes,
             process_id=args.process_id,
         )
-    machine.enable_compilation_cache(args.cache_dir or None)
-    start = time.perf_counter()
-    paths = run(args.config, args.out, model_path=args.model, progress=not args.no_progress)
+    lock = None
+    if not args.distributed or jax.process_index() == 0:  # the one process that writes
+        try:  # beside the folder, which a run replaces as a whole
+            lock = run_folder.lock_folder(args.out, beside=True)
+        except run_folder.FolderBusyError as err:
+            build_parser().error(f"--out: {err}")
+    try:
+        machine.enable_compilation_cache(args.cache_dir or None)
+        start = time.perf_counter()
+        paths = run(args.config, args.out, model_path=args.model, progress=not args.no_progress)
+    finally:
+        if lock is not None:
+            lock.release()
     for path in paths:
         print(path)
     if paths:
