@@ -95,6 +95,7 @@ def batched_rollout(arm: mjx_arm.Arm, impl: str):
         actuators=tuple(int(i) for i in arm.actuator_ids),
         n_substeps=arm.n_substeps,
         valve_params=arm.valve,
+        controls=arm.chamber_controls,
     )
     if impl == "warp":
         bound["warp_host_model"] = host_model(arm)

@@ -24,7 +24,7 @@ import numpy as np
 from mujoco import mjx
 from mujoco import rollout as mj_rollout
 
-from mjx_arm import checks, constants, domains, valve
+from mjx_arm import checks, constants, domains, stretch, valve
 from mjx_arm.checks import check_pressures, validate_model
 from mjx_arm.constants import POSE_DIM
 from mjx_arm.machine import usable_cores
@@ -120,6 +120,12 @@ class Arm:
     def actuator_ids(self) -> np.ndarray:
         return np.array([self.mj_model.actuator(n).id for n in constants.CHAMBER_ACTUATORS])
 
+    @functools.cached_property
+    def chamber_controls(self) -> stretch.ChamberControls:
+        """How chamber pressures become this model's controls (`mjx_arm.stretch`): the chamber
+        actuators, plus the hinges' stretch softening where the model has it."""
+        return stretch.from_model(self.mj_model)
+
     # ------------------------------------------------------------------ rollouts
 
     def rollout(self, pressures_bar, backend: str = "mjx", chunk: int = C_CHUNK) -> np.ndarray:
@@ -181,6 +187,7 @@ class Arm:
             actuators=tuple(int(i) for i in self.actuator_ids),
             n_substeps=self.n_substeps,
             valve_params=self.valve,
+            controls=self.chamber_controls,
             rest_qpos=jnp.asarray(self.rest_qpos),
             rest_qvel=jnp.asarray(self.rest_qvel),
         )
@@ -406,8 +413,8 @@ def _chunk_controls(pressure, commands, arm: Arm, nu: int) -> np.ndarray:
             1,
         )
         p = sub[:, k, -1]
-    ctrl = np.zeros((n_batch, periods * arm.n_substeps, nu))
-    ctrl[..., arm.actuator_ids] = sub.reshape(n_batch, -1, 3)
+    ctrl = arm.chamber_controls.numpy(sub.reshape(n_batch, -1, 3))
+    assert ctrl.shape[-1] == nu
     return ctrl
 
 
@@ -422,6 +429,7 @@ def rollout_program(
     rest_qpos: jnp.ndarray,
     rest_qvel: jnp.ndarray,
     warp_host_model: mujoco.MjModel | None = None,
+    controls: stretch.ChamberControls | None = None,
 ):
     """One program [T, 3] (bar) -> poses [T, 6] and ok flags [T], in pure JAX.
 
@@ -435,6 +443,8 @@ def rollout_program(
       n_substeps: physics steps per control period.
       valve_params: the valve model.
       rest_qpos, rest_qvel: the state every rollout starts from.
+      controls: how pressures become the model's controls (`Arm.chamber_controls`, needed
+        for a model with stretch softening); None sets only the chamber actuators.
       warp_host_model: for an MJX-Warp `mjx_model` (`put_model(..., impl="warp")`), the host
         `mujoco.MjModel` it came from: MJX-Warp's `make_data` refuses an `mjx.Model`. It only
         sizes the data (any domain of the arm will do); qpos and qvel become the rest state.
@@ -451,7 +461,10 @@ def rollout_program(
     commands = valve.saturate(commands_bar, valve_params)
 
     def physics_step(data, pressure):
-        data = data.replace(ctrl=data.ctrl.at[actuators].set(pressure))
+        if controls is None:
+            data = data.replace(ctrl=data.ctrl.at[actuators].set(pressure))
+        else:
+            data = data.replace(ctrl=controls.jax(data.ctrl, pressure))
         return mjx.step(mjx_model, data), None
 
     def control_step(carry, command):
@@ -496,8 +509,7 @@ def _settle(
       number stays finite).
     """
     data = mujoco.MjData(m)
-    ids = [m.actuator(n).id for n in constants.CHAMBER_ACTUATORS]
-    data.ctrl[ids] = p_min
+    data.ctrl[:] = stretch.from_model(m).numpy(np.full(3, p_min))
     steps_per_check = max(1, int(0.1 / m.opt.timestep))
     speed = 0.0
     for _ in range(int(max_time_s / 0.1)):

@@ -52,6 +52,16 @@ CUSTOM_VALVE_FIELDS = {
 #: `mjx_arm.fit` fits per model and `mjx_arm.domains.CONSTRAINED` applies.
 CUSTOM_CONSTRAINED_SCALE = "constrained_viscosity_scale"
 
+#: Actuators that make the chain's bending follow the rod's stretch (`mjx_arm.stretch`): on each
+#: bending hinge the chamber span covers, "soften_<joint>" (gain affine in the joint angle)
+#: and "unload_<joint>" (a motor). Models without them (the solid arm, the linear-law arm, a
+#: foreign MJCF) bend with constant stiffness.
+SOFTEN_PREFIX = "soften_"
+UNLOAD_PREFIX = "unload_"
+#: The <custom><numeric> field with the axial rest strain one bar of chamber pressure imposes
+#: on the chamber span (1/bar): the stretch e = 1 + w * stretch_per_bar * (p0 + p1 + p2).
+CUSTOM_STRETCH_PER_BAR = "stretch_per_bar"
+
 BAR_TO_PA = 1.0e5
 
 #: The paper code's media: translational damping constants c (1/s) of its damper

@@ -138,6 +138,17 @@ def spring_frequency_rad_per_s(mj_model: mujoco.MjModel) -> float:
     return max(frequencies)
 
 
+def _scale_stretch_softening(m: mujoco.MjModel, stiffness_scale: float) -> None:
+    """A softer arm's hinge softening (`mjx_arm.stretch`) follows its springs: each softening
+    gain is its hinge's stiffness, and the chambers stretch a softer body further."""
+    soften = [i for i in range(m.nu) if m.actuator(i).name.startswith(constants.SOFTEN_PREFIX)]
+    if not soften or stiffness_scale == 1.0:
+        return
+    m.actuator_gainprm[soften, 1] *= stiffness_scale
+    numeric = m.numeric(constants.CUSTOM_STRETCH_PER_BAR)
+    m.numeric_data[m.numeric_adr[numeric.id]] /= stiffness_scale
+
+
 def apply(
     mj_model: mujoco.MjModel, domain: Domain, source: str = "the MJCF", solid: bool = False
 ) -> float:
@@ -158,6 +169,7 @@ def apply(
     if m.opt.viscosity <= 0 and m.opt.density <= 0:
         raise ValueError("the domain's medium has zero viscosity and density: MJX drops fluid code")
     m.jnt_stiffness[:] *= domain.stiffness_scale
+    _scale_stretch_softening(m, domain.stiffness_scale)
     m.body_mass[:] *= domain.mass_scale
     m.body_inertia[:] *= domain.mass_scale
 

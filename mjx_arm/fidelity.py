@@ -125,7 +125,7 @@ def mujoco_t63(arm: mjx_arm.Arm, hold_s: float, use_valve: bool) -> float:
     pressures = valve_pressures(STEP_COMMAND, hold_s, arm.timestep_s, use_valve)
     deflection = np.empty(len(pressures))
     for i, p in enumerate(pressures):
-        data.ctrl[arm.actuator_ids] = p
+        data.ctrl[:] = arm.chamber_controls.numpy(p)
         mujoco.mj_step(m, data)
         deflection[i] = np.linalg.norm(data.site_xpos[arm.tip_site_id][:2] - rest_xy)
     return time_constant_63(arm.timestep_s * np.arange(1, len(pressures) + 1), deflection)
@@ -289,7 +289,7 @@ def stability(n_segments: int) -> dict:
         data = mujoco.MjData(m)
         data.qpos[:] = arm.rest_qpos
         for command in programs[0]:
-            data.ctrl[arm.actuator_ids] = command
+            data.ctrl[:] = arm.chamber_controls.numpy(command)
             mujoco.mj_step(m, data, nstep=arm.n_substeps)
         warnings = {
             mujoco.mjtWarning(i).name: int(w.number) for i, w in enumerate(data.warning) if w.number

@@ -100,6 +100,12 @@ class ArmParams:
     but adds ten joints and slowed MJX's compile on the CPU]. None: on for the I-Support
     section, off for the solid one, whose frozen model keeps x then y throughout.
     """
+    stretch_softening: bool | None = None
+    """Bend every hinge the chamber span covers like the stretched rod, (c - k q) / e^3, with
+    e read from the chamber pressures (`mjx_arm.stretch`) [choice: the paper's Cosserat law
+    (Gazzola et al. 2018) softens bending as e^3 and the chambers stretch the body by up to
+    37%; constant springs cannot follow it]. None: on for the I-Support section, off for the
+    solid one, whose frozen model keeps constant springs."""
     euler_implicit_damping: bool = False
     """Keep MuJoCo's implicit joint-damping pass in the Euler step [choice: the joints carry no
     damping (the reference rod has no material damping; the medium does all of it), so the
@@ -111,6 +117,8 @@ class ArmParams:
             raise ValueError(f"unknown section {self.section!r}; known: {sections.SECTIONS}")
         if self.alternate_bend is None:
             object.__setattr__(self, "alternate_bend", self.section == "isupport")
+        if self.stretch_softening is None:
+            object.__setattr__(self, "stretch_softening", self.section == "isupport")
         missing = [n for n in fitted.FIT_NAMES if getattr(self, n) is None]
         if missing:
             stored = fitted.load_fit(fitted.FIT_PATHS[self.section])
@@ -203,6 +211,13 @@ class ArmParams:
         return math.pi * inner**2
 
     @property
+    def stretch_per_bar(self) -> float:
+        """Axial rest strain of the chamber span per bar of summed chamber pressure (1/bar): the
+        chain's own chamber force per bar over its stretch stiffness s E A."""
+        axial = self.stiffness_scale * self.youngs_modulus_pa * self.area_m2
+        return self.chamber_gain_n_per_bar / axial
+
+    @property
     def segment_inertia_kgm2(self) -> tuple[float, float, float]:
         """Inertia of one segment about its centre of mass (x, y, z), its mass spread like the
         section's area: m (I / A + l^2 / 12) across, m J / A about the axis."""
@@ -283,6 +298,19 @@ def bend_hinges(params: ArmParams, segment: int) -> list[tuple[str, str]]:
     """The bending hinges at the top of `segment`, in order: (name suffix, axis)."""
     hinges = [("x", "1 0 0"), ("y", "0 1 0")]
     return hinges[::-1] if params.alternate_bend and segment % 2 else hinges
+
+
+def softened_hinges(params: ArmParams) -> list[tuple[str, float, float]]:
+    """The bending hinges `mjx_arm.stretch` softens: (joint name, stiffness N m/rad, share of
+    its rod inside the chamber span), for every hinge the span covers."""
+    hinges = []
+    for i, _, bend in chamber_span_weights(params):
+        if bend <= 1e-9:
+            continue
+        stiffness = (2.0 if i == 0 else 1.0) * params.bend_stiffness_nm_per_rad
+        for axis, _ in bend_hinges(params, i):
+            hinges.append((f"bend_{i}_{axis}", stiffness, bend))
+    return hinges
 
 
 def chamber_offsets_m(params: ArmParams) -> list[tuple[float, float]]:
@@ -431,6 +459,8 @@ def generate_xml(params: ArmParams = ArmParams()) -> str:
     euler_damp = "" if p.euler_implicit_damping else ' eulerdamp="disable"'
     lines.append(f'    <flag contact="disable"{euler_damp}/>')
     lines.append("  </option>")
+    if p.stretch_softening:
+        lines.append('  <size nuser_actuator="1"/>')
     lines.append("  <custom>")
     for name, value in constants.CUSTOM_VALVE_FIELDS.items():
         lines.append(f'    <numeric name="{name}" data="{_f(value)}"/>')
@@ -438,6 +468,11 @@ def generate_xml(params: ArmParams = ArmParams()) -> str:
         f'    <numeric name="{constants.CUSTOM_CONSTRAINED_SCALE}"'
         f' data="{_f(p.constrained_viscosity_scale)}"/>'
     )
+    if p.stretch_softening:
+        lines.append(
+            f'    <numeric name="{constants.CUSTOM_STRETCH_PER_BAR}"'
+            f' data="{_f(p.stretch_per_bar)}"/>'
+        )
     lines.append("  </custom>")
     lines.append("  <visual>")
     lines.append('    <global offwidth="1280" offheight="720"/>')
@@ -480,6 +515,17 @@ def generate_xml(params: ArmParams = ArmParams()) -> str:
     lines.append("  <actuator>")
     for name in constants.CHAMBER_ACTUATORS:
         lines.append(f'    <general name="{name}" tendon="{name}" class="chamber"/>')
+    if p.stretch_softening:
+        for joint, stiffness, weight in softened_hinges(p):
+            lines.append(
+                f'    <general name="{constants.SOFTEN_PREFIX}{joint}" joint="{joint}"'
+                f' gaintype="affine" gainprm="0 {_f(stiffness)} 0" biastype="none"'
+                f' user="{_f(weight)}"/>'
+            )
+            lines.append(
+                f'    <motor name="{constants.UNLOAD_PREFIX}{joint}" joint="{joint}"'
+                f' user="{_f(weight)}"/>'
+            )
     lines.append("  </actuator>")
 
     lines.append("  <sensor>")

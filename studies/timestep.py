@@ -33,7 +33,7 @@ def single_thread_speed(arm: mjx_arm.Arm, seconds: float = 5.0) -> float:
     """Simulated seconds per wall second of one MuJoCo C thread under mid pressures."""
     data = mujoco.MjData(arm.mj_model)
     data.qpos[:] = arm.rest_qpos
-    data.ctrl[arm.actuator_ids] = 1.5
+    data.ctrl[:] = arm.chamber_controls.numpy(np.full(3, 1.5))
     steps = int(round(seconds / arm.timestep_s))
     start = time.perf_counter()
     mujoco.mj_step(arm.mj_model, data, nstep=steps)

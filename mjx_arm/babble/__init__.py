@@ -254,6 +254,7 @@ class ShardedRollout:
             tuple(int(i) for i in arm.actuator_ids),
             arm.n_substeps,
             arm.valve,
+            arm.chamber_controls,
         )
 
     def shard(self, commands_bar: np.ndarray) -> jax.Array:
@@ -322,7 +323,7 @@ def _local_mjx_model(arm: arm_lib.Arm) -> mjx.Model:
 
 
 @functools.lru_cache(maxsize=16)
-def _sharded_fn(devices, tip_site, actuators, n_substeps, valve_params):
+def _sharded_fn(devices, tip_site, actuators, n_substeps, valve_params, controls):
     """jit(vmap(rollout)) of (mjx_model, (rest_qpos, rest_qvel), commands [B, T, 3]), cached."""
     mesh = batch_mesh(devices)
     replicated, batch = NamedSharding(mesh, P()), NamedSharding(mesh, P("batch"))
@@ -335,6 +336,7 @@ def _sharded_fn(devices, tip_site, actuators, n_substeps, valve_params):
             actuators=actuators,
             n_substeps=n_substeps,
             valve_params=valve_params,
+            controls=controls,
             rest_qpos=rest[0],
             rest_qvel=rest[1],
         )
