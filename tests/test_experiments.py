@@ -560,6 +560,15 @@ def test_an_out_that_is_a_file_or_not_writable_is_a_usage_error(fake, capsys):
     assert f"cannot write in {locked}" in capsys.readouterr().err
 
 
+def _wait_for(pid_file, timeout_s=120.0):
+    """Waits until the fake stage has written its pid (the chain first asks a child process
+    for JAX's device, which takes seconds on a busy machine)."""
+    end = time.monotonic() + timeout_s
+    while not (pid_file.exists() and pid_file.read_text()):
+        assert time.monotonic() < end, "the chain's command did not start"
+        time.sleep(0.05)
+
+
 def _running(pid: int) -> bool:
     """Whether a process runs (a zombie waiting for its reaper does not)."""
     try:
@@ -581,10 +590,7 @@ def test_a_second_chain_on_one_folder_is_refused_at_once(fake, capsys):
         [paper.sys.executable, "-m", "experiments.paper", *argv], cwd=paper.REPO
     )
     try:
-        for _ in range(600):
-            if pid_file.exists() and pid_file.read_text():
-                break
-            time.sleep(0.05)
+        _wait_for(pid_file)
         before = sorted(p.name for p in chain.out.iterdir())
         start = time.monotonic()
         with pytest.raises(SystemExit) as exit_:
@@ -595,12 +601,12 @@ def test_a_second_chain_on_one_folder_is_refused_at_once(fake, capsys):
     finally:
         first.kill()
         first.wait()
-        child = int(pid_file.read_text())
+        child = int(pid_file.read_text() or 0) if pid_file.exists() else 0
         for _ in range(100):
-            if not _running(child):
+            if not child or not _running(child):
                 break
             time.sleep(0.05)
-        if _running(child):
+        if child and _running(child):
             os.kill(child, 9)
 
 
@@ -615,10 +621,7 @@ def test_a_killed_chain_takes_its_command_with_it(fake):
     parent = subprocess.Popen(
         [paper.sys.executable, "-m", "experiments.paper", *argv], cwd=paper.REPO
     )
-    for _ in range(600):
-        if pid_file.exists() and pid_file.read_text():
-            break
-        time.sleep(0.05)
+    _wait_for(pid_file)
     child = int(pid_file.read_text())
     assert _running(child)
     parent.kill()
