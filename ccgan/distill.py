@@ -28,7 +28,7 @@ validation ("complete": false until the run ends), so a killed run keeps its bes
         --seeds 0 1 2 --hold-factor 15 --out runs/ccgan_distilled
 
 As `ccgan.finetune`, the CLI simulates the arm of `--model` (default the I-Support arm,
-`mjx_arm.constants.DEFAULT_MODEL_PATH`, the one the committed translators were trained on).
+`mjx_arm.constants.TRANSLATOR_MODEL_PATH`, the one the committed translators were trained on).
 """
 
 from __future__ import annotations

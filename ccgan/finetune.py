@@ -40,7 +40,7 @@ pose bounds; the fine-tuning settings and history added to their metadata), name
     python -m ccgan.finetune --translators results/paper/run/ccgan/translator_seed{0,1,2}.ckpt \\
         --seeds 0 1 2 --out runs/ccgan_ft
 
-The CLI simulates the arm of `--model` (default `mjx_arm.constants.DEFAULT_MODEL_PATH`, the
+The CLI simulates the arm of `--model` (default `mjx_arm.constants.TRANSLATOR_MODEL_PATH`, the
 I-Support arm the committed translators were trained on; `models/softarm_solid.xml` is the
 earlier solid-disc arm, whose translators are in results/solid/translators/)
 in D_s and in `--domain`, and refuses translators whose file records another arm's model hash.

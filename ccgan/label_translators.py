@@ -30,7 +30,7 @@ from ccgan.translator import LABELS, TRANSLATORS_DIR, missing_labels
 from mjx_arm import constants
 
 #: The arm the committed run was made with (models/softarm.xml when the chain ran).
-RUN_MODEL = constants.DEFAULT_MODEL_PATH.parent / "softarm_linear.xml"
+RUN_MODEL = constants.TRANSLATOR_MODEL_PATH
 #: The run's stage folders that hold translators.
 STAGES = ("ccgan", "wcgan", "ccgan_large", "aged", "ccgan_sim", "aged_sim")
 #: The record of what was relabelled, beside the stage folders.

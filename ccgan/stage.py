@@ -190,9 +190,9 @@ def stage_parser(module: str, doc: str) -> argparse.ArgumentParser:
     p.add_argument("--out", required=True, help="output folder")
     p.add_argument(
         "--model",
-        default=str(constants.DEFAULT_MODEL_PATH),
+        default=str(constants.TRANSLATOR_MODEL_PATH),
         help="MJCF of the arm to simulate: the one the translators were trained on (the"
-        " committed translators: the I-Support arm, models/softarm.xml)",
+        " committed translators: models/softarm_linear.xml)",
     )
     p.add_argument(
         "--domain",

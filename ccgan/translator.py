@@ -21,7 +21,7 @@ from ccgan.data import (
 )
 from ccgan.models import ForwardModel, Generator, forward_open_loop
 
-#: The committed translators of the I-Support arm (models/softarm.xml): the run folder of
+#: The committed translators of the I-Support arm (models/softarm_linear.xml): the run folder of
 #: `python -m experiments.paper`, one folder per stage (ccgan, wcgan, ccgan_sim, aged, aged_sim).
 TRANSLATORS_DIR = Path(__file__).resolve().parent.parent / "results" / "paper" / "run"
 #: The earlier solid-disc arm's translators (models/softarm_solid.xml), kept for comparison.

@@ -54,8 +54,18 @@ RESULTS_DIR = "results"
 #: Parent of the run folders that runs with other settings write when no output folder is given:
 #: RUNS_DIR/quick-<time> for --quick, RUNS_DIR/custom-<time> otherwise, never results/.
 RUNS_DIR = "runs"
+#: What the report says of the arm at constants.TRANSLATOR_MODEL_PATH.
+ARM_NOTE = (
+    "the I-Support arm fitted to the rod without stretch factors (the linear law), on which the"
+    " committed translators (results/paper/run/) were trained; the default arm"
+    " (models/softarm.xml) now follows the paper's Cosserat law, and its translators await a"
+    " rerun of the chain"
+)
 #: What the report says of the arm at constants.DEFAULT_MODEL_PATH.
-ARM_NOTE = "the I-Support arm, on which the committed translators (results/paper/run/) were trained"
+DEFAULT_ARM_NOTE = (
+    "the I-Support arm under the paper's Cosserat law (the default model); the committed"
+    " translators were trained on models/softarm_linear.xml, not on it"
+)
 #: What the report says of the arm at constants.SOLID_MODEL_PATH.
 SOLID_ARM_NOTE = (
     "the earlier solid-disc arm, whose translators are in results/solid/translators/ (give them"
@@ -113,9 +123,9 @@ class EvalConfig:
     """A smoke run (`quick`): marked on every plot and video and in shapes.md."""
     xml: str | None = None
     """MJCF text of the arm (None: the file model_path); tests pass a 3-segment arm."""
-    model_path: str = str(constants.DEFAULT_MODEL_PATH)
-    """MJCF file of the arm when xml is None. Default: the I-Support arm
-    (`constants.DEFAULT_MODEL_PATH`), the one the committed translators were trained on."""
+    model_path: str = str(constants.TRANSLATOR_MODEL_PATH)
+    """MJCF file of the arm when xml is None. Default: the arm the committed translators were
+    trained on (`constants.TRANSLATOR_MODEL_PATH`, models/softarm_linear.xml)."""
     target_domain: str = "constrained"
     """The domain translated into (D_c): "constrained", or "aged" for the second pair."""
     ccgan_path: str | None = None
@@ -258,10 +268,11 @@ def model_description(cfg: EvalConfig) -> dict:
     except ValueError:
         name = str(path)
     notes = {
-        constants.DEFAULT_MODEL_PATH.resolve(): ARM_NOTE,
+        constants.TRANSLATOR_MODEL_PATH.resolve(): ARM_NOTE,
+        constants.DEFAULT_MODEL_PATH.resolve(): DEFAULT_ARM_NOTE,
         constants.SOLID_MODEL_PATH.resolve(): SOLID_ARM_NOTE,
     }
-    other = "not the arm the committed translators were trained on (models/softarm.xml)"
+    other = "not the arm the committed translators were trained on (models/softarm_linear.xml)"
     return {"file": name, "note": notes.get(path, other)}
 
 

@@ -198,8 +198,9 @@ def _add_arm_options(p: argparse.ArgumentParser) -> None:
         "--model",
         metavar="MJCF",
         default=EvalConfig.model_path,
-        help="MJCF file of the arm; by default the I-Support arm, on which the committed"
-        " translators were trained (models/softarm_solid.xml: the earlier solid-disc arm)",
+        help="MJCF file of the arm; by default models/softarm_linear.xml, the I-Support arm the"
+        " committed translators were trained on (models/softarm.xml: the paper-law arm;"
+        " models/softarm_solid.xml: the solid-disc arm)",
     )
     p.add_argument(
         "--target-domain",

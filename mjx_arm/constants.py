@@ -19,6 +19,10 @@ SOLID_MODEL_PATH = ROOT / "models" / "softarm_solid.xml"
 #: translators and tables (results/paper/run/, results/) were made with it, and stay labelled
 #: as belonging to it until the chain is rerun on the default model.
 LINEAR_LAW_MODEL_PATH = ROOT / "models" / "softarm_linear.xml"
+#: The arm the committed I-Support translators (results/paper/run/) were trained on, and so the
+#: default arm of every command that scores or refines them (eval.shapes, the fine-tune stages),
+#: until the chain is rerun on `DEFAULT_MODEL_PATH`.
+TRANSLATOR_MODEL_PATH = LINEAR_LAW_MODEL_PATH
 
 #: Actuators of the three chambers, at 0, 120 and 240 degrees around the arm's axis.
 CHAMBER_ACTUATORS = ("chamber_0", "chamber_1", "chamber_2")

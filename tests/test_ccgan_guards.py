@@ -300,7 +300,7 @@ def test_stages_simulate_the_arm_named_by_model(tmp_path, small_arm, shipped, ca
     for module in (finetune, distill):
         p = module.build_parser()
         assert p.parse_args(["--translators", "t", "--out", "o"]).model == str(
-            constants.DEFAULT_MODEL_PATH
+            constants.TRANSLATOR_MODEL_PATH
         )
     model, model_hash = small_arm
     p = finetune.build_parser()

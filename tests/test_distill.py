@@ -120,8 +120,8 @@ def test_distill_cli_writes_translators_with_their_history(tmp_path):
     assert meta["finetune"]["method"] == "distill" and meta["finetune"]["seed"] == 0
     assert meta["finetune"]["complete"]
     # By default the stage simulates the I-Support arm the shipped translators were trained on.
-    arm = mjx_arm.load(constants.DEFAULT_MODEL_PATH)
-    assert meta["finetune"]["model"] == str(constants.DEFAULT_MODEL_PATH)
+    arm = mjx_arm.load(constants.TRANSLATOR_MODEL_PATH)
+    assert meta["finetune"]["model"] == str(constants.TRANSLATOR_MODEL_PATH)
     assert meta["finetune"]["model_hash"] == arm.model_hash
     assert (out / "teacher.npz").exists() and (out / "distill.json").exists()
     shipped = load_translator(source)

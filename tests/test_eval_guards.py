@@ -89,11 +89,11 @@ def test_quick_run_is_marked_and_states_its_arm_and_lengths(in_tmp, capsys):
     assert out.name.startswith("quick-") and not Path("results").exists()
     assert data["config"]["out_dir"] == str(out)
     # The default arm is the I-Support one the committed translators were trained on.
-    assert data["model_hash"] == _file_hash(constants.DEFAULT_MODEL_PATH)
-    assert data["model"]["file"] == "models/softarm.xml"
+    assert data["model_hash"] == _file_hash(constants.TRANSLATOR_MODEL_PATH)
+    assert data["model"]["file"] == "models/softarm_linear.xml"
     md = (out / "shapes.md").read_text()
     assert "QUICK RUN: 1 s programs, seeds [0]" in md
-    assert "`models/softarm.xml`, the I-Support arm" in md
+    assert "`models/softarm_linear.xml`, the I-Support arm" in md
     assert "0.5 s validation program" in md and "20 s validation" not in md
     assert json.loads((out / "shapes.json").read_text())["config"]["quick"] is True
     figures = [out / f for f in data["figures"]]
@@ -327,10 +327,14 @@ def test_translators_trained_on_another_arm_are_refused(small_xml, tmp_path, mon
 
 
 def test_default_arm_is_the_isupport_one_and_model_path_is_used(small_xml, tmp_path):
-    assert pipeline.EvalConfig().model_path == str(constants.DEFAULT_MODEL_PATH)
+    assert pipeline.EvalConfig().model_path == str(constants.TRANSLATOR_MODEL_PATH)
     described = pipeline.model_description(pipeline.EvalConfig())
-    assert described["file"] == "models/softarm.xml"
-    assert "I-Support arm" in described["note"]
+    assert described["file"] == "models/softarm_linear.xml"
+    assert "I-Support arm" in described["note"] and "without stretch factors" in described["note"]
+    default = pipeline.model_description(
+        pipeline.EvalConfig(model_path=str(constants.DEFAULT_MODEL_PATH))
+    )
+    assert "paper's Cosserat law" in default["note"] and "not on it" in default["note"]
     solid = pipeline.model_description(
         pipeline.EvalConfig(model_path=str(constants.SOLID_MODEL_PATH))
     )
