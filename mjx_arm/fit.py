@@ -126,10 +126,10 @@ def simulate(params: ArmParams, data: dict[str, dict]) -> dict[str, np.ndarray]:
     return out
 
 
-def residual_one(x: np.ndarray, data: dict[str, dict]) -> np.ndarray:
+def residual_one(x: np.ndarray, data: dict[str, dict], base: ArmParams = ArmParams()) -> np.ndarray:
     """Residual vector of one log-parameter vector."""
     try:
-        poses = simulate(params_from_log(x), data)
+        poses = simulate(params_from_log(x, base), data)
         fits = [pose_residuals(poses[d], data[d]["poses"]) for d in FIT_DOMAINS]
     except SimulationDivergedError:
         fits = [np.full(data[d]["poses"].size, DIVERGED_M) for d in FIT_DOMAINS]
@@ -150,7 +150,13 @@ def rms_errors(poses: dict[str, np.ndarray], data: dict[str, dict]) -> dict[str,
     return out
 
 
-def fit(data: dict[str, dict], max_iter: int = 30, log=print, progress: bool = False) -> dict:
+def fit(
+    data: dict[str, dict],
+    max_iter: int = 30,
+    log=print,
+    progress: bool = False,
+    base: ArmParams = ArmParams(),
+) -> dict:
     """Runs the least-squares fit from the physical values; returns the JSON-ready result.
 
     Args:
@@ -158,6 +164,7 @@ def fit(data: dict[str, dict], max_iter: int = 30, log=print, progress: bool = F
       max_iter: Levenberg-Marquardt iterations at most.
       log: receives the optimiser's iteration report.
       progress: show a progress bar over the residual evaluations.
+      base: the arm whose four factors are fitted (e.g. without stretch softening).
     """
     x0 = initial_log()
     evaluations = 0
@@ -168,7 +175,9 @@ def fit(data: dict[str, dict], max_iter: int = 30, log=print, progress: bool = F
         columns = x.reshape(len(NAMES), -1)
         evaluations += columns.shape[1]
         bar.update(columns.shape[1])
-        out = np.stack([residual_one(columns[:, j], data) for j in range(columns.shape[1])], axis=1)
+        out = np.stack(
+            [residual_one(columns[:, j], data, base) for j in range(columns.shape[1])], axis=1
+        )
         return out if x.ndim == 2 else out[:, 0]
 
     bounds = (x0 - LOG_BOUND, x0 + LOG_BOUND)
@@ -187,10 +196,12 @@ def fit(data: dict[str, dict], max_iter: int = 30, log=print, progress: bool = F
     wall = time.perf_counter() - t0
     bar.close()
     log(report.getvalue().rstrip())
-    before = rms_errors(simulate(params_from_log(x0), data), data)
-    after = rms_errors(simulate(params_from_log(x), data), data)
+    before = rms_errors(simulate(params_from_log(x0, base), data), data)
+    after = rms_errors(simulate(params_from_log(x, base), data), data)
     return {
-        "command": "python -m mjx_arm.fit",
+        "command": "python -m mjx_arm.fit"
+        + ("" if base.stretch_softening else " --constant-springs"),
+        "stretch_softening": base.stretch_softening,
         "cpu": cpu_model(),
         "wall_s": wall,
         "evaluations": evaluations,
@@ -203,7 +214,7 @@ def fit(data: dict[str, dict], max_iter: int = 30, log=print, progress: bool = F
             "seconds": FIT_SECONDS,
             "hold_periods": list(FIT_HOLD_PERIODS),
             "reference": "mjx_arm.cosserat: 20 elements, the arm's section and mass, damping"
-            " 800 / 8000 1/s at 2e-4 s",
+            " 800 / 8000 1/s at 2e-4 s, Gazzola's law (the stretch factors)",
             "section": ArmParams().section,
         },
         "fit_error_before": before,
@@ -245,7 +256,15 @@ def main(argv: list[str] | None = None) -> int:
         action="store_true",
         help="rewrite the committed models/softarm_fit.json and models/softarm.xml from the fit",
     )
+    parser.add_argument(
+        "--constant-springs",
+        action="store_true",
+        help="fit the chain without stretch softening (constant joint springs), for comparison;"
+        " refused with --write-model",
+    )
     args = parser.parse_args(argv)
+    if args.constant_springs and args.write_model:
+        parser.error("--constant-springs is a comparison: it cannot be the committed fit")
     if args.max_iter < 1:
         parser.error("--max-iter must be >= 1")
     if args.out is None and not args.write_model:
@@ -257,7 +276,8 @@ def main(argv: list[str] | None = None) -> int:
     data = reference_data()
     seconds = time.perf_counter() - t0
     print(f"reference rod data: {len(FIT_SEEDS)} x {FIT_SECONDS:g} s per domain in {seconds:.1f} s")
-    result = fit(data, args.max_iter, progress=True)
+    base = dataclasses.replace(ArmParams(), stretch_softening=not args.constant_springs)
+    result = fit(data, args.max_iter, progress=True, base=base)
     for name in NAMES:
         print(f"{name:30s} {result['initial'][name]:10.4g} -> {result['fitted'][name]:10.4g}")
     for domain in FIT_DOMAINS:
