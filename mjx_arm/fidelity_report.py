@@ -7,7 +7,7 @@ import math
 
 def _regime_lines(results: dict) -> list[str]:
     """The regime table: what the committed arm does, rod and chain, beside the solid disc."""
-    rows = {(r["domain"], r["n_segments"]): r for r in results["rows"]}
+    rows = {(r["domain"], r["n_segments"]): r for r in results["rows"] if not r.get("variant")}
     src, con = rows[("source", 10)], rows[("constrained", 10)]
     solid = results.get("solid") or {}
     length = results["arm"]["length_m"]
@@ -26,7 +26,14 @@ def _regime_lines(results: dict) -> list[str]:
             f" {1e3 * s['displacement_mujoco_m']:.1f} / {math.degrees(s['bend_mujoco_rad']):.1f} |"
             f" {'' if old is None else f'{1e3 * old:.1f} (xy) / -'} |"
         )
-    e = next(s for s in src["static"] if s["chamber"] < 0)
+    common = next((s for s in src["static"] if s["chamber"] == -2), None)
+    if common is not None:
+        lines.append(
+            "| chamber 0 at 3.5, others at 1.5 bar (common mode): bend deg |"
+            f" {math.degrees(common['bend_rod_rad']):.1f} |"
+            f" {math.degrees(common['bend_mujoco_rad']):.1f} | - |"
+        )
+    e = next(s for s in src["static"] if s["chamber"] == -1)
     lines.append(
         "| all three at 3.5 bar: elongation mm (% L) |"
         f" {1e3 * e['elongation_rod_m']:.1f} ({100 * e['elongation_rod_m'] / length:.0f}%) |"
@@ -155,7 +162,7 @@ def _statics_lines(results: dict) -> list[str]:
         if row["domain"] != "source":
             continue
         for s in row["static"]:
-            chamber = "all" if s["chamber"] < 0 else s["chamber"]
+            chamber = {-1: "all", -2: "0, others 1.5"}.get(s["chamber"], s["chamber"])
             lines.append(
                 f"| {row['model']} | {chamber} | {s['pressure_bar']:g} |"
                 f" {1e3 * s['tip_error_m']:.2f} | {s['tip_error_pct_length']:.2f} |"
@@ -180,7 +187,9 @@ def to_markdown(results: dict) -> str:
         f" {a['mass_kg']:g} kg spread along the length, E = {a['youngs_modulus_pa'] / 1e6:.3f} MPa,"
         f" A = {a['area_m2']:.3g} m^2, I = {a['second_moment_m4']:.3g} m^4."
         f" Reference: `mjx_arm.cosserat` with the same section and mass, {c['n_elements']}"
-        f" elements, the paper code's damper v <- v exp(-c dt) at c ="
+        f" elements, {c.get('law', 'linear')} law"
+        f"{' (force / e, couple / e^3, as PyElastica)' if c.get('law') == 'gazzola' else ''},"
+        " the paper code's damper v <- v exp(-c dt) at c ="
         f" {c['damping_per_s']['source']:g} / {c['damping_per_s']['constrained']:g} 1/s and its"
         f" step of {c['timestep_s'] * 1e6:.0f} us (a linear drag of 867.6 and 19,765 1/s per unit"
         " mass: the constrained medium is 22.8x the source's, not 10x). The committed model's"
