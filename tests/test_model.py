@@ -8,6 +8,7 @@ import pytest
 
 import mjx_arm
 from mjx_arm import ArmParams, constants, generate_xml
+from mjx_arm.model_gen import softened_hinges
 
 
 def test_committed_model_equals_generator_output():
@@ -46,7 +47,10 @@ def test_segment_counts_compile_with_chamber_ending_at_its_length(n_segments):
     m = mujoco.MjModel.from_xml_string(generate_xml(params))
     d = mujoco.MjData(m)
     mujoco.mj_forward(m, d)
-    assert m.nu == 3 and m.ntendon == 3
+    # Three chambers, and a softening and an unloading actuator per hinge the chamber spans.
+    assert m.nu == 3 + 2 * len(softened_hinges(params)) and m.ntendon == 3
+    weights = [w for _, _, w in softened_hinges(params)]
+    assert all(0.0 < w <= 1.0 for w in weights) and weights[0] == 1.0
     # Each chamber's fixed tendon stretches by exactly the chamber's length per unit strain.
     seg = params.segment_length_m
     for k in range(3):
@@ -79,7 +83,7 @@ def test_ten_seconds_of_random_pressures_raise_no_mujoco_warning(domain):
     d.qpos[:] = arm.rest_qpos
     rng = np.random.default_rng(0)
     for _ in range(100):  # 100 control periods of 0.1 s
-        d.ctrl[arm.actuator_ids] = rng.uniform(0.0, 3.5, 3)
+        d.ctrl[:] = arm.chamber_controls.numpy(rng.uniform(0.0, 3.5, 3))
         mujoco.mj_step(m, d, nstep=arm.n_substeps)
     assert all(w.number == 0 for w in d.warning), [
         (mujoco.mjtWarning(i).name, w.number) for i, w in enumerate(d.warning) if w.number
@@ -98,7 +102,7 @@ def test_chamber_force_bends_a_free_chain_into_the_rods_arc():
     m = arm.mj_model
     d = mujoco.MjData(m)
     d.qpos[:] = arm.rest_qpos
-    d.ctrl[:] = [2.0, 0.0, 0.0]
+    d.ctrl[:] = arm.chamber_controls.numpy(np.array([2.0, 0.0, 0.0]))  # softening included
     mujoco.mj_step(m, d, nstep=20000)
     force = 2.0 * params.chamber_gain_n_per_bar
     e_i = params.youngs_modulus_pa * params.second_moment_m4
