@@ -38,7 +38,7 @@ with _contextlib.redirect_stdout(_io.StringIO()):
     from mujoco import mjx as _mjx  # noqa: E402, F401
 
 # JAX's persistent compilation cache, so that a second process does not compile the same rollout
-# again (minutes on the CPU, 43-81 s per batch shape on an H100). Its key holds the jax version,
+# again (minutes on the CPU, 43-81 s per batch shape on an H100). Its key holds the jaxlib version,
 # the backend and XLA_FLAGS, so stale entries are never used. SOFTARM_JAX_CACHE=0 turns it off,
 # SOFTARM_JAX_CACHE=/path moves it; a cache directory set through JAX itself is left alone.
 COMPILATION_CACHE_ENV = "SOFTARM_JAX_CACHE"
