@@ -103,7 +103,7 @@ def main(argv=None) -> None:
     from bench import run_header, write_results
 
     p = cli_parser("bench.compile_cache", __doc__)
-    p.add_argument("--jobs", nargs="+", choices=JOBS, default=["shapes", "forward"])
+    p.add_argument("--jobs", nargs="+", choices=JOBS, default=list(JOBS), help="jobs to time")
     p.add_argument(
         "--min-compile-time-s",
         type=float,
