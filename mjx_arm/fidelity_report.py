@@ -94,7 +94,7 @@ def _segment_lines(results: dict) -> list[str]:
         "",
         "## Fidelity against segment count",
         "",
-        "Static error: worst tip error over the ten held commands. Babbling: 3 x 60 s, targets"
+        "Static error: worst tip error over the eleven held commands. Babbling: 3 x 60 s, targets"
         f" uniform in [0.2, 3.5] bar held {results['protocol']['babble_hold_periods'][0]}-"
         f"{results['protocol']['babble_hold_periods'][1]} control periods; excursion is the rod's"
         " RMS tip distance from rest. MuJoCo C sim s/s: simulated seconds per wall second of"
