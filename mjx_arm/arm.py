@@ -33,9 +33,10 @@ from mjx_arm.machine import usable_cores
 MAX_JOINT_SPEED = 1.0e3
 #: Trajectories per MuJoCo C `mujoco.rollout` call in `Arm.rollout`: each call holds every
 #: substep's full state of a 5 s slice ([chunk, 1250, nstate] float64, with its copies and the
-#: controls). Measured peak: 2.6 MB per trajectory for the 20-segment arm, 0.67 GB for a chunk
-#: of 256 (`python -m bench.c_chunk_memory`, bench/results/cpu/c_chunk_memory.md); 256 still
-#: fills every core.
+#: controls, 43 per substep with stretch softening). Measured peak for the committed arm:
+#: 3.3-3.8 MB per trajectory, 0.84 GB for a chunk of 256 (`python -m bench.c_chunk_memory`,
+#: bench/results/cpu/c_chunk_memory.md; 2.6 MB and 0.67 GB for the linear-law arm's 3
+#: controls); 256 still fills every core.
 C_CHUNK = 256
 #: A rest state still moving faster than this (rad/s or m/s) after `_settle`'s time is unsettled.
 SETTLED_SPEED = 1.0e-3
