@@ -138,9 +138,10 @@ class BabbleConfig:
 #: The paper's data: 50 training and 3 validation trajectories of 60 s in each domain.
 PAPER = BabbleConfig()
 
-#: Host memory of one MuJoCo C rollout chunk per trajectory (bytes): 2.6 MB measured for the
-#: 20-segment arm (bench/results/cpu/c_chunk_memory.md), with a margin.
-C_BYTES_PER_TRAJECTORY = 3_000_000
+#: Host memory of one MuJoCo C rollout chunk per trajectory (bytes): 3.3-3.8 MB measured for the
+#: committed arm with its stretch-softening controls (bench/results/cpu/c_chunk_memory.md), with
+#: a margin.
+C_BYTES_PER_TRAJECTORY = 4_500_000
 #: Fraction of the available memory a run may plan to use: the rest is for Python, JAX, MuJoCo
 #: and the temporaries the estimate leaves out.
 MEMORY_FRACTION = 0.8
