@@ -1,6 +1,6 @@
 """Tests of eval/render.py: the video's camera frames each arm, and a frame shows the arm and the
-tip paths. Both committed arms (the solid-disc arm, tip moves ~1.6 cm; the I-Support arm, ~20 cm)
-render a 2 s program at the main job's panel size (six frames a panel; MuJoCo C, EGL, CPU)."""
+tip paths. Both committed arms (the solid-disc arm, tip moves ~1.6 cm; the I-Support arm, ~14 cm)
+render a 3 s program at the main job's panel size (ten frames a panel; MuJoCo C, EGL, CPU)."""
 
 import numpy as np
 import pytest
@@ -17,8 +17,9 @@ BACKGROUND_MAX = 12
 
 
 def _traj() -> dict:
-    """Chamber 0 at 3.5 bar for 2 s: the arm bends as far as it goes in that time."""
-    p = np.full((20, 3), 0.2)
+    """Chamber 0 at 3.5 bar for 3 s: the arm bends as far as it goes in that time (the
+    I-Support arm's tip 14 cm, the solid arm's 1.6 cm)."""
+    p = np.full((30, 3), 0.2)
     p[:, 0] = 3.5
     return {
         "pressures_s": p,
@@ -52,8 +53,8 @@ def _panels(frame: np.ndarray) -> list[np.ndarray]:
 def test_frame_size_and_count(rendered):
     _, _, frames, _, _ = rendered
     h, w = pipeline.EvalConfig().video_panel_hw
-    # 20 source steps, one frame every round(10 Hz * 4 / 15 fps) = 3 steps: steps 2, 5, ..., 17.
-    assert frames.shape == (6, h, 3 * w, 3) and frames.dtype == np.uint8
+    # 30 source steps, one frame every round(10 Hz * 4 / 15 fps) = 3 steps: steps 2, 5, ..., 29.
+    assert frames.shape == (10, h, 3 * w, 3) and frames.dtype == np.uint8
     assert min(h, w) >= 480
 
 
@@ -99,7 +100,7 @@ def test_every_arm_pose_projects_inside_the_scene_window(rendered):
 
 def test_close_up_only_where_the_tip_moves_little(rendered):
     name, _, _, views, _ = rendered
-    # 3.5 bar on one chamber moves the solid arm's tip 1.6 cm, the I-Support arm's 20 cm.
+    # 3.5 bar on one chamber moves the solid arm's tip 1.6 cm, the I-Support arm's 14 cm in 3 s.
     assert (views.closeup is not None) == (name == "solid")
 
 
