@@ -14,6 +14,8 @@ from tracking.config import ConfigError, check_fields
 if TYPE_CHECKING:
     from ccgan.forward import ForwardConfig
 
+#: Where `TrainConfig.k_choice` scores the hold factors.
+K_CHOICES = ("simulator", "forward")
 #: The feedback rollouts `TrainConfig.feedback_impl` can name.
 FEEDBACK_IMPLS = ("auto", "lean", "lean_reduce")
 #: Rollouts that were options once and lost (docs/benchmarks.md, "Retired experiments"). A
@@ -64,11 +66,19 @@ class TrainConfig:
     #: Hold factors k (control periods each translated command is held) to choose from
     #: (paper: 5..30). Formerly `stretch_choices` (`RENAMED_FIELDS`).
     hold_factors: tuple[int, ...] = (5, 10, 15, 20, 25, 30)
-    #: Epochs between choices of k (the paper's N; also chosen once before training).
-    stretch_every: int = 10
-    #: Control steps per held-out window when choosing k (0 = whole trajectories). Each window
-    #: starts F_c from the recorded pose, so the windows run in parallel: the choice costs
-    #: val_window_length * k_max sequential F_c periods instead of T_val * k_max.
+    #: Epochs between choices of k (the paper's N; also chosen once before training and, with
+    #: k_choice "simulator", after the last epoch).
+    stretch_every: int = 100
+    #: Where k is chosen: "simulator" runs G_c's commands on the held-out D_s programs in the
+    #: target-domain arm, as the authors' code does (`ccgan.sim_choice`); "forward" runs them
+    #: through the learned F_c inside the jitted epoch (fast, but F_c's open-loop drift enters).
+    k_choice: str = "simulator"
+    #: Seconds of each held-out program simulated when k_choice is "simulator" (0 = whole
+    #: programs; the authors' code uses one 30 s program).
+    k_choice_seconds: float = 20.0
+    #: Control steps per held-out window when k_choice is "forward" (0 = whole trajectories).
+    #: Each window starts F_c from the recorded pose, so the windows run in parallel: the
+    #: choice costs val_window_length * k_max sequential F_c periods instead of T_val * k_max.
     val_window_length: int = 100
     #: LSTM time steps per loop iteration in the generators (numerics unchanged).
     gen_unroll: int = 10
@@ -117,6 +127,7 @@ class TrainConfig:
                 "hold_factors": 1,
                 "stretch_every": 1,
                 "val_window_length": 0,
+                "k_choice_seconds": 0,
                 "gen_unroll": 1,
                 "feedback_unroll": 1,
                 "checkpoint_every": 1,
@@ -127,6 +138,8 @@ class TrainConfig:
             above={"lr_generator": 0, "lr_critic": 0},
             below={"beta1": 1, "beta2": 1},
         )
+        if self.k_choice not in K_CHOICES:
+            raise ConfigError("k_choice", f"must be one of {K_CHOICES}, got {self.k_choice!r}")
         if self.feedback_impl not in FEEDBACK_IMPLS:
             retired = (
                 ", a retired rollout (docs/benchmarks.md)"

@@ -76,16 +76,8 @@ def data_fingerprint(data: TranslationData) -> str:
     )
 
 
-def _write_csv(path: Path, rows: list[dict]) -> None:
-    tmp = path.with_suffix(".tmp")
-    with open(tmp, "w", newline="") as f:
-        w = csv.DictWriter(f, fieldnames=["seed", "epoch", *METRICS])
-        w.writeheader()
-        w.writerows(rows)
-    os.replace(tmp, path)
-
-
-def _read_csv(path: Path) -> list[dict]:
+def _read_rows(path: Path) -> list[dict]:
+    """The rows of a CSV written by `_write_rows` (ints for seed and epoch, floats otherwise)."""
     if not path.exists():
         return []
     with open(path, newline="") as f:
@@ -93,6 +85,16 @@ def _read_csv(path: Path) -> list[dict]:
     return [
         {k: int(v) if k in ("seed", "epoch") else float(v) for k, v in row.items()} for row in rows
     ]
+
+
+def _write_rows(path: Path, rows: list[dict], fieldnames=None) -> None:
+    """Writes rows as a CSV, atomically; columns `fieldnames` (default: the first row's keys)."""
+    tmp = path.with_suffix(".tmp")
+    with open(tmp, "w", newline="") as f:
+        w = csv.DictWriter(f, fieldnames=fieldnames or list(rows[0]))
+        w.writeheader()
+        w.writerows(rows)
+    os.replace(tmp, path)
 
 
 def _resume_expectation(ckpt_path: Path, meta: dict) -> dict:
@@ -134,12 +136,14 @@ def train_and_evaluate(
     model_hash: str | None = None,
     stop=None,
     domains: tuple[str, str] | None = None,
+    k_choice=None,
 ):
     """Trains one or several seeds (vmapped), with a CSV log, checkpoints and a translator file.
 
     Files in `workdir`: `state.ckpt` (stacked TrainState of every seed, every checkpoint_every
     epochs), `metrics.csv` (one row per seed and epoch, every loss term), `translator_seed{s}.ckpt`
-    and `translator.ckpt` (first seed) for `ccgan.load_translator`.
+    and `translator.ckpt` (first seed) for `ccgan.load_translator`; with `config.k_choice`
+    "simulator", `k_choices.csv` too (one row per seed and choice: the held-out error at every k).
 
     Args:
       config, data, forward_c_params, forward_model: as `make_trainer`.
@@ -155,15 +159,24 @@ def train_and_evaluate(
         (`ccgan.translator.LABELS`); without them and `model_hash` the files are unlabelled.
       stop: a `threading.Event`; once set, the run checkpoints after the epoch in progress and
         returns unfinished (no translator files), to be resumed.
+      k_choice: a `ccgan.sim_choice.SimulatorChoice` on the target-domain arm; needed when
+        `config.k_choice` is "simulator" (it chooses k before training, every `stretch_every`
+        epochs and after the last).
 
     Returns:
       (state with a leading seed axis, rows of the metrics CSV).
     """
     from tqdm.auto import tqdm
 
+    if config.k_choice == "simulator" and k_choice is None:
+        raise ValueError(
+            'config.k_choice is "simulator": pass k_choice=ccgan.sim_choice.SimulatorChoice(arm,'
+            ' data, config) on the target-domain arm, or set k_choice="forward"'
+        )
     workdir = Path(workdir)
     workdir.mkdir(parents=True, exist_ok=True)
     ckpt_path, csv_path = workdir / "state.ckpt", workdir / "metrics.csv"
+    choices_path = workdir / "k_choices.csv"
     meta = {"config": config.to_dict(), "data": data_fingerprint(data), "seeds": list(seeds)}
     resuming = resume and ckpt_path.exists()
     if resuming:
@@ -172,12 +185,21 @@ def train_and_evaluate(
     trainer = make_trainer(config, data, forward_c_params, forward_model)
     state, run_keys = _initial_states(trainer, seeds)
     rows: list[dict] = []
+    choice_rows: list[dict] = []
     if resuming:
         state, rows = _resumed(ckpt_path, csv_path, state, expect)
+        choice_rows = [r for r in _read_rows(choices_path) if r["epoch"] <= int(state.epoch[0])]
     done = int(np.asarray(state.epoch)[0])
+    after_epoch = None
+    if k_choice is not None and config.k_choice == "simulator":
+        after_epoch = _simulator_choice(k_choice, config, seeds, choice_rows, choices_path)
+        if not resuming:  # like the authors' code: once before training, untrained G_c
+            state, _ = after_epoch(0, state, None)
     bar = tqdm(total=config.epochs, initial=done, unit="epoch", disable=not progress, desc="ccgan")
     record = _chunk_recorder(ckpt_path, csv_path, meta, seeds, rows, bar)
-    state = _run_chunks(trainer, state, run_keys, config, done, max_chunks, record, stop)
+    state = _run_chunks(
+        trainer, state, run_keys, config, done, max_chunks, record, stop, after_epoch
+    )
     bar.close()
     if int(np.asarray(state.epoch)[0]) >= config.epochs:
         _save_translators(
@@ -192,6 +214,36 @@ def train_and_evaluate(
             domains,
         )
     return state, rows
+
+
+def _simulator_choice(k_choice, config: TrainConfig, seeds, rows: list[dict], path: Path):
+    """`after_epoch(epochs_done, state, metrics) -> (state, metrics)` for `_run_chunks`.
+
+    After the epochs where k is due (every `stretch_every` and the last; 0 = before training),
+    chooses each seed's k in the simulator, sets it in the state and in that epoch's metrics
+    (k, val_error_cm), and appends one row per seed to `rows`, rewritten to `path`.
+    """
+
+    def after_epoch(epochs_done: int, state, metrics):
+        due = epochs_done % config.stretch_every == 0 or epochs_done == config.epochs
+        if not due:
+            return state, metrics
+        g_c = jax.tree.map(lambda x: x[:, 0], state.params["gen"])
+        choice = k_choice.choose(g_c)
+        state = state.replace(k=jnp.asarray(choice.k, state.k.dtype))
+        for s_i, seed in enumerate(seeds):
+            row = {"seed": seed, "epoch": epochs_done, "k": int(choice.k[s_i])}
+            for k, err in zip(config.hold_factors, choice.errors_cm[s_i], strict=True):
+                row[f"error_cm_k{k}"] = float(err)
+            rows.append(row)
+        _write_rows(path, rows)
+        if metrics is not None:
+            metrics = dict(metrics)
+            metrics["k"] = metrics["k"].at[:, -1].set(jnp.asarray(choice.k, jnp.float32))
+            metrics["val_error_cm"] = metrics["val_error_cm"].at[:, -1].set(choice.error_cm)
+        return state, metrics
+
+    return after_epoch
 
 
 def _initial_states(trainer: Trainer, seeds: tuple[int, ...]):
@@ -214,7 +266,7 @@ def _resumed(ckpt_path: Path, csv_path: Path, state: TrainState, expect: dict):
     """
     state, _ = checkpoint.load(ckpt_path, target=state, expect=expect)
     done = int(np.asarray(state.epoch)[0])
-    return state, [r for r in _read_csv(csv_path) if int(r["epoch"]) <= done]
+    return state, [r for r in _read_rows(csv_path) if int(r["epoch"]) <= done]
 
 
 def _chunk_recorder(ckpt_path: Path, csv_path: Path, meta: dict, seeds, rows: list[dict], bar):
@@ -232,7 +284,7 @@ def _chunk_recorder(ckpt_path: Path, csv_path: Path, meta: dict, seeds, rows: li
                 row.update({m: float(metrics[m][s_i, e]) for m in METRICS})
                 rows.append(row)
         checkpoint.save(ckpt_path, jax.device_get(state), meta | {"epoch": start + n})
-        _write_csv(csv_path, rows)
+        _write_rows(csv_path, rows, ["seed", "epoch", *METRICS])
         bar.set_postfix({m: float(np.nanmean(metrics[m][:, -1])) for m in ("generator_total", "k")})
         bar.update(n)
 
@@ -240,7 +292,15 @@ def _chunk_recorder(ckpt_path: Path, csv_path: Path, meta: dict, seeds, rows: li
 
 
 def _run_chunks(
-    trainer: Trainer, state, run_keys, config: TrainConfig, done, max_chunks, record, stop=None
+    trainer: Trainer,
+    state,
+    run_keys,
+    config: TrainConfig,
+    done,
+    max_chunks,
+    record,
+    stop=None,
+    after_epoch=None,
 ):
     """Runs epochs done.. in chunks of `checkpoint_every` (vmapped over seeds); returns the state.
 
@@ -250,6 +310,8 @@ def _run_chunks(
     a time and the host waits for each before the next, so it never runs ahead of a stop; the
     next chunk starts before the last one's files are written, so the device keeps working while
     the host saves (JAX dispatch is asynchronous; the arrays are immutable).
+    `after_epoch(epochs_done, state, metrics [S, 1] each) -> (state, metrics)`, when given, runs
+    after every epoch (`_simulator_choice`).
     """
     chunk = max(1, config.checkpoint_every)
     run = jax.jit(jax.vmap(trainer.run_epochs, in_axes=(0, 0, None, None)), static_argnums=3)
@@ -261,6 +323,8 @@ def _run_chunks(
         parts = []
         for epoch in range(start, min(start + chunk, config.epochs)):
             state, metrics = run(state, run_keys, jnp.int32(epoch), 1)
+            if after_epoch is not None:
+                state, metrics = after_epoch(epoch + 1, state, metrics)
             parts.append(metrics)
             if stop is not None:
                 jax.block_until_ready(state)
@@ -399,6 +463,22 @@ def copy_forward_models(parser, source: Path, workdir: Path, f_meta: dict) -> No
         shutil.copy2(source / name, workdir / name)
 
 
+def simulator_choice_from_args(parser, args, config: TrainConfig, data: TranslationData, d_c):
+    """The `ccgan.sim_choice.SimulatorChoice` of --k-choice simulator: the target domain's arm
+    from --model (default `models/softarm.xml`), which must be the arm the data came from."""
+    import mjx_arm
+    from ccgan.sim_choice import SimulatorChoice
+
+    arm = mjx_arm.load(args.model, domain=d_c.domain)
+    if d_c.model_hash is not None and d_c.model_hash != arm.model_hash:
+        parser.error(
+            f"--k-choice simulator scores k on {arm.path} (model hash {arm.model_hash}), but the"
+            f" data come from an arm with hash {d_c.model_hash}: pass that arm's MJCF as --model"
+        )
+    label = None if args.no_progress else "k in the simulator"
+    return SimulatorChoice(arm, data, config, progress=label)
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The options of `python -m ccgan.train`."""
     parser = cli_parser("ccgan.train", __doc__)
@@ -474,6 +554,9 @@ def main(argv=None) -> None:
         check_data(config, data)
     except ValueError as err:
         parser.error(f"the data do not suit the options: {err}")
+    k_choice = None
+    if config.k_choice == "simulator" and not args.forward_only:
+        k_choice = simulator_choice_from_args(parser, args, config, data, d_c)
     enable_compilation_cache()
     workdir = Path(args.workdir)
     workdir.mkdir(parents=True, exist_ok=True)
@@ -504,6 +587,7 @@ def main(argv=None) -> None:
         model_hash=d_s.model_hash,
         stop=stop,
         domains=(d_s.domain, d_c.domain),
+        k_choice=k_choice,
     )
     if int(np.asarray(state.epoch)[0]) < config.epochs:
         print(

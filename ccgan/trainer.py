@@ -12,7 +12,9 @@ penalty), then both generators against the updated critics (adversarial + lambda
 identity + lambda_f feedback). The feedback term runs the frozen forward model F_c open-loop on
 G_c's commands, each held for k control periods (the hold factor k), and compares every k-th pose
 with the D_s target. Every `stretch_every` epochs, the hold factor k is re-chosen from
-`hold_factors` by the tracking error on held-out D_s trajectories.
+`hold_factors` by the tracking error on held-out D_s trajectories: here through F_c when
+`k_choice` is "forward", in the target-domain simulator by `ccgan.train` (`ccgan.sim_choice`)
+when it is "simulator", the default.
 
 This module holds no I/O: files, the command line and resumption are `ccgan.train`'s.
 """
@@ -204,6 +206,8 @@ def make_trainer(
     n_win = t_val // l_val
     low, high = jnp.asarray(data.bounds.low), jnp.asarray(data.bounds.high)
     choices = jnp.asarray(config.hold_factors, jnp.int32)
+    # k through F_c, inside the jitted epoch; with "simulator" the host chooses it between epochs.
+    in_jit_choice = config.k_choice == "forward"
 
     def to_windows(x):
         return x[:, : n_win * l_val].reshape(-1, l_val, x.shape[-1])
@@ -251,8 +255,9 @@ def make_trainer(
             k=choices[0],
             epoch=jnp.zeros((), jnp.int32),
         )
-        # Like the authors' code, pick k once before training, with the untrained generator.
-        return choose_k(state)[0]
+        # Like the authors' code, pick k once before training, with the untrained generator
+        # (in the simulator, `ccgan.train` does it on the host).
+        return choose_k(state)[0] if in_jit_choice else state
 
     # Both domains' networks of a type run as one call vmapped over the stacked parameters
     # (index 0: G_c / C_c, 1: G_s / C_s): half the sequential kernels of two separate calls.
@@ -376,14 +381,16 @@ def make_trainer(
             train_step, state, (idx_in, idx_c, jax.random.split(k_steps, steps))
         )
         metrics = {name: v.mean() for name, v in out.items()}
-        # `epoch` comes from the scan's xs, so under vmap over seeds the predicate stays unbatched
-        # and this stays a real branch (k is evaluated every stretch_every epochs, not every one).
-        state, val_err = jax.lax.cond(
-            (epoch + 1) % config.stretch_every == 0,
-            choose_k,
-            lambda s: (s, jnp.array(jnp.nan, jnp.float32)),
-            state,
-        )
+        val_err = jnp.array(jnp.nan, jnp.float32)
+        if in_jit_choice:
+            # `epoch` comes from the scan's xs, so under vmap over seeds the predicate stays
+            # unbatched and this stays a real branch (k is evaluated every stretch_every epochs).
+            state, val_err = jax.lax.cond(
+                (epoch + 1) % config.stretch_every == 0,
+                choose_k,
+                lambda s: (s, jnp.array(jnp.nan, jnp.float32)),
+                state,
+            )
         metrics["k"] = state.k.astype(jnp.float32)
         metrics["val_error_cm"] = val_err
         for name in METRICS:

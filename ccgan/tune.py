@@ -370,7 +370,8 @@ def build_parser() -> argparse.ArgumentParser:
     add_config_flags(parser, forward_lib.ForwardConfig, prefix="forward-")
     add_config_flags(parser, SearchSpace, prefix="space-")
     add_config_flags(parser, TrainConfig, skip=TUNED)
-    parser.set_defaults(epochs=5)
+    # The trial's value is the F_c error at the best k, so k is chosen through F_c in training too.
+    parser.set_defaults(epochs=5, k_choice="forward")
     return parser
 
 

@@ -254,6 +254,7 @@ TINY = config_lib.TrainConfig(
     n_val=1,
     hold_factors=(1, 2),
     stretch_every=2,
+    k_choice="forward",
     checkpoint_every=2,
     gen_hidden=8,
     gen_fc=16,
@@ -360,6 +361,63 @@ def test_end_to_end_and_resume_equals_uninterrupted(tiny_setup, tmp_path):
     other = dataclasses.replace(TINY, lambda_cycle=3.0)
     with pytest.raises(checkpoint.CheckpointError, match="lambda_cycle: stored 10.0, this run 3.0"):
         train_lib.train_and_evaluate(other, data, fparams, tmp_path / "cut", **kw)
+
+
+def test_k_chosen_in_the_target_arm_like_the_authors_and_resumed_exactly(tiny_setup, tmp_path):
+    """k_choice "simulator": G_c's held-out commands run in the D_c arm at every k, per seed."""
+    from ccgan.sim_choice import SimulatorChoice
+    from tracking import held
+
+    data, fconf, fparams, _, _ = tiny_setup
+    xml = mjx_arm.generate_xml(dataclasses.replace(mjx_arm.ArmParams(), n_segments=3))
+    arm_c = mjx_arm.load(xml=xml, domain="constrained")
+    config = dataclasses.replace(
+        TINY, k_choice="simulator", hold_factors=(1, 3), stretch_every=3, k_choice_seconds=2.0
+    )
+    judge = SimulatorChoice(arm_c, data, config)
+    assert judge.n_steps == 20  # 2 s at 10 Hz
+
+    # Refused without the simulator.
+    with pytest.raises(ValueError, match="SimulatorChoice"):
+        train_lib.train_and_evaluate(config, data, fparams, tmp_path / "none", progress=False)
+
+    kw = dict(seeds=(0, 1), forward_model=fconf.model, progress=False, k_choice=judge)
+    full, rows = train_lib.train_and_evaluate(config, data, fparams, tmp_path / "full", **kw)
+    choices = train_lib._read_rows(tmp_path / "full" / "k_choices.csv")
+    # Before training, after epoch 3 (stretch_every) and after the last (4), for both seeds.
+    assert [(r["epoch"], r["seed"]) for r in choices] == [(e, s) for e in (0, 3, 4) for s in (0, 1)]
+    last = {r["seed"]: r for r in choices if r["epoch"] == 4}
+    for s_i, seed in enumerate((0, 1)):
+        errors = [last[seed][f"error_cm_k{k}"] for k in config.hold_factors]
+        assert int(full.k[s_i]) == config.hold_factors[int(np.argmin(errors))]
+        row = next(r for r in rows if r["seed"] == seed and r["epoch"] == 4)
+        assert row["val_error_cm"] == pytest.approx(min(errors), rel=1e-6)
+        tr = ccgan.load_translator(
+            tmp_path / "full" / f"translator_seed{seed}.ckpt", trust_unlabelled=True
+        )
+        assert tr.k == int(full.k[s_i])
+
+        # The error at each k, by hand: seed's G_c on the first 2 s of the held-out program,
+        # held k periods, from rest in the D_c arm, every k-th pose against the D_s poses.
+        gen = models.Generator(hidden=config.gen_hidden, fc=config.gen_fc)
+        g_c = train_lib.generator(jax.tree.map(lambda x, i=s_i: x[i], full.params), 0)
+        out = np.asarray(gen.apply(g_c, jnp.asarray(data.source.val)))[:, :20]
+        cmd = data_lib.denormalise_pressure(out[..., :3]).astype(np.float64)
+        target = data_lib.denormalise_pose(data.source.val[:, :20, 3:], data.bounds)
+        for k, err in zip(config.hold_factors, errors, strict=True):
+            poses = held.every_kth(arm_c.rollout(held.stretch(cmd, k), backend="c"), k)
+            assert metrics.position_error_cm(poses, target).mean() == pytest.approx(err, rel=1e-4)
+
+    # The D_c arm is slower: the untranslated program held 3 periods tracks better than at 1.
+    stretch_only = judge.stretch_only_errors()
+    assert stretch_only[1] < stretch_only[0]
+
+    # Cut after the first chunk and resumed: the same parameters, k and choice log.
+    train_lib.train_and_evaluate(config, data, fparams, tmp_path / "cut", max_chunks=1, **kw)
+    resumed, _ = train_lib.train_and_evaluate(config, data, fparams, tmp_path / "cut", **kw)
+    assert _params_equal(resumed.params, full.params)
+    assert np.array_equal(resumed.k, full.k)
+    assert train_lib._read_rows(tmp_path / "cut" / "k_choices.csv") == choices
 
 
 def test_retired_feedback_rollouts_are_refused_by_name():

@@ -78,6 +78,7 @@ def usage_error(main, argv, capsys) -> str:
 
 TINY_TRAIN = ["--epochs", "1", "--batch-size", "2", "--window-length", "5", "--n-val", "1"]
 TINY_TRAIN += ["--forward-epochs", "1", "--gen-hidden", "4", "--gen-fc", "4"]
+TINY_TRAIN += ["--k-choice", "forward"]  # the simulator's choice: tests/test_ccgan.py
 
 
 # ----------------------------------------------------------------------------- data files
