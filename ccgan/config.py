@@ -97,6 +97,15 @@ class TrainConfig:
     gen_hidden: int = 32
     #: Generator FC width (paper: 128).
     gen_fc: int = 128
+    #: Generator on each time step alone, as the authors' code trains it (sequence length 1).
+    gen_per_sample: bool = False
+    #: Generator as the identity plus a learnt correction (`ccgan.models.Generator`).
+    gen_residual: bool = False
+    #: Critic updates per generator update, each on the step's batch with a fresh gradient
+    #: penalty sample (the authors' code: 1; WGAN-GP's authors: 5).
+    critic_steps: int = 1
+    #: Adversarial-loss weight (paper: 1; 0 ablates the critics' influence on the generators).
+    lambda_adversarial: float = 1.0
     #: Critic Conv1D widths (five layers).
     critic_features: tuple[int, ...] = (32, 64, 64, 128, 128)
 
@@ -121,6 +130,8 @@ class TrainConfig:
                 "beta2": 0,
                 "weight_decay": 0,
                 "lambda_cycle": 0,
+                "lambda_adversarial": 0,
+                "critic_steps": 1,
                 "lambda_identity": 0,
                 "lambda_feedback": 0,
                 "lambda_gp": 0,
@@ -150,6 +161,17 @@ class TrainConfig:
                 "feedback_impl",
                 f"must be one of {FEEDBACK_IMPLS}, got {self.feedback_impl!r}{retired}",
             )
+
+    @property
+    def generator_args(self) -> dict:
+        """The `ccgan.models.Generator` fields these settings give (the translator files'
+        "generator" metadata)."""
+        return {
+            "hidden": self.gen_hidden,
+            "fc": self.gen_fc,
+            "per_sample": self.gen_per_sample,
+            "residual": self.gen_residual,
+        }
 
     @property
     def stride(self) -> int:

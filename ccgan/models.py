@@ -391,6 +391,15 @@ class Generator(nn.Module):
 
     9 in (pressure 3 + pose 6), two LSTM layers of 32, FC 128 + ReLU, linear 9. The pressure part is
     squashed with a sigmoid into the normalised valve range [0, 1]; the pose part is linear.
+
+    Two variants, both off by default:
+      per_sample: every time step on its own, as the authors' code trains G (sequences of length
+        1): the same layers, the LSTMs starting from a zero carry at each step, so G is a static
+        map of the current sample.
+      residual: G starts as the identity and learns a correction: the pressure part is
+        sigmoid(logit(p_in) + d), the pose part x_in + d, with the last layer zero at
+        initialisation. D_s and D_c share their statics, so at long holds the right translation
+        is near the identity; a plain G must first learn it.
     """
 
     hidden: int = 32
@@ -399,15 +408,23 @@ class Generator(nn.Module):
     #: Time steps per iteration of the LSTM scans (numerics unchanged; the parameters do not
     #: depend on it).
     unroll: int = 1
+    per_sample: bool = False
+    residual: bool = False
 
     @nn.compact
     def __call__(self, x):
         """x: [B, T, 9] normalised samples -> [B, T, 9] (pressure in [0, 1], then pose)."""
-        h = x
+        h = x.reshape(-1, 1, x.shape[-1]) if self.per_sample else x
         for i in range(self.n_layers):
             h = nn.RNN(nn.OptimizedLSTMCell(self.hidden), unroll=self.unroll, name=f"lstm_{i}")(h)
+        h = h.reshape(*x.shape[:-1], self.hidden)
         h = nn.relu(nn.Dense(self.fc, name="fc")(h))
-        out = nn.Dense(PRESSURE_DIM + POSE_DIM, name="out")(h)
+        init = nn.initializers.zeros_init() if self.residual else nn.initializers.lecun_normal()
+        out = nn.Dense(PRESSURE_DIM + POSE_DIM, kernel_init=init, name="out")(h)
+        if self.residual:
+            p_in = jnp.clip(x[..., :PRESSURE_DIM], 1e-3, 1 - 1e-3)
+            pressure = nn.sigmoid(jnp.log(p_in) - jnp.log1p(-p_in) + out[..., :PRESSURE_DIM])
+            return jnp.concatenate([pressure, x[..., PRESSURE_DIM:] + out[..., PRESSURE_DIM:]], -1)
         return jnp.concatenate([nn.sigmoid(out[..., :PRESSURE_DIM]), out[..., PRESSURE_DIM:]], -1)
 
 

@@ -77,7 +77,7 @@ class SimulatorChoice:
         # whole program and keeping its prefix.
         self._samples = jnp.asarray(val[:, :n_steps])
         self.target = denormalise_pose(val[:, :n_steps, PRESSURE_DIM:], data.bounds)
-        generator = Generator(hidden=config.gen_hidden, fc=config.gen_fc, unroll=config.gen_unroll)
+        generator = Generator(**config.generator_args, unroll=config.gen_unroll)
         self._commands = jax.jit(
             jax.vmap(lambda params: generator.apply(params, self._samples)[..., :PRESSURE_DIM])
         )

@@ -182,7 +182,7 @@ def make_trainer(
     # arguments and the compiled program would be the same; read top to bottom, this is the
     # whole training algorithm in one place.
     fwd = forward_model or ForwardModel()
-    gen = Generator(hidden=config.gen_hidden, fc=config.gen_fc, unroll=config.gen_unroll)
+    gen = Generator(**config.generator_args, unroll=config.gen_unroll)
     critic = Critic(features=config.critic_features)
     tx_gen = _optimizer(config.lr_generator, config)
     tx_critic = _optimizer(config.lr_critic, config)
@@ -330,7 +330,7 @@ def make_trainer(
                 fakes["same_c"], xc
             )
         out["adversarial"] = adv
-        total = adv + config.lambda_feedback * out["feedback"]
+        total = config.lambda_adversarial * adv + config.lambda_feedback * out["feedback"]
         if cycle:
             total = total + config.lambda_cycle * out["cycle"]
             total = total + config.lambda_identity * out["identity"]
@@ -351,12 +351,21 @@ def make_trainer(
         with jax.named_scope("generators_forward"):
             fakes, generators_vjp = jax.vjp(lambda g: generator_outputs(g, xs, xc), gp)
 
-        with jax.named_scope("critic_update"):
+        def critic_update(carry, critic_key):
+            cp, opt_critic = carry
             (_, c_out), c_grads = jax.value_and_grad(critic_losses, has_aux=True)(
-                cp, jax.lax.stop_gradient(fakes), xs, xc, key
+                cp, jax.lax.stop_gradient(fakes), xs, xc, critic_key
             )
-            c_updates, opt_critic = tx_critic.update(c_grads, state.opt_critic, cp)
-            cp = optax.apply_updates(cp, c_updates)
+            c_updates, opt_critic = tx_critic.update(c_grads, opt_critic, cp)
+            return (optax.apply_updates(cp, c_updates), opt_critic), c_out
+
+        with jax.named_scope("critic_update"):
+            if config.critic_steps == 1:
+                (cp, opt_critic), c_out = critic_update((cp, state.opt_critic), key)
+            else:  # several updates on this batch, each with its own penalty sample
+                keys = jax.random.split(key, config.critic_steps)
+                (cp, opt_critic), c_outs = jax.lax.scan(critic_update, (cp, state.opt_critic), keys)
+                c_out = jax.tree.map(lambda v: v[-1], c_outs)
 
         with jax.named_scope("generator_losses"):
             (_, g_out), fakes_ct = jax.value_and_grad(generator_losses, has_aux=True)(

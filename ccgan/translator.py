@@ -217,7 +217,7 @@ def save_translator(
         "kind": "translator",
         "k": int(k),
         "bounds": bounds.to_dict(),
-        "generator": {"hidden": config.gen_hidden, "fc": config.gen_fc},
+        "generator": config.generator_args,
         "forward": {"hidden": fwd.hidden, "fc": fwd.fc},
         "config": config.to_dict(),
         "method": "wcgan" if config.baseline else "ccgan",

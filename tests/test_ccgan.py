@@ -78,6 +78,28 @@ def test_network_shapes_no_nan(t):
     assert c.shape == (2,) and jnp.isfinite(c).all()
 
 
+def test_generator_variants_per_sample_and_residual():
+    key = jax.random.PRNGKey(1)
+    x = jax.random.uniform(key, (2, 7, 9), minval=0.05, maxval=0.95)
+    # Per sample (the authors' sequence length 1): each step's output is its own sample's, so
+    # reversing time reverses the output; the recurrent G carries its state and does not.
+    per = models.Generator(hidden=8, fc=16, per_sample=True)
+    params = per.init(key, x)
+    np.testing.assert_allclose(per.apply(params, x[:, ::-1]), per.apply(params, x)[:, ::-1], 1e-6)
+    rec = models.Generator(hidden=8, fc=16)
+    rp = rec.init(key, x)
+    assert not np.allclose(rec.apply(rp, x[:, ::-1]), rec.apply(rp, x)[:, ::-1], atol=1e-4)
+    # Same variables either way: only the carry differs.
+    assert jax.tree.structure(params) == jax.tree.structure(rp)
+    # Residual: the identity at initialisation, and a correction once its last layer moves.
+    res = models.Generator(hidden=8, fc=16, residual=True)
+    r_params = res.init(key, x)
+    np.testing.assert_allclose(res.apply(r_params, x), x, atol=1e-6)
+    moved = jax.tree.map(lambda v: v + 0.1, r_params)
+    y = res.apply(moved, x)
+    assert not np.allclose(y, x, atol=1e-3) and (y[..., :3] > 0).all() and (y[..., :3] < 1).all()
+
+
 def test_time_conv_equals_flax_conv():
     """The critic's matmul convolution: nn.Conv's variables, init and values (kernel 3 and 4)."""
     import flax.linen as nn
@@ -451,6 +473,31 @@ def test_baseline_and_vmapped_make_train(tiny_setup):
     # Two seeds give two different generators.
     g = state.params["gen"]["params"]["out"]["kernel"][:, 0]
     assert not np.array_equal(g[0], g[1])
+
+
+def test_variant_settings_train(tiny_setup):
+    """Two critic updates per step, the authors' per-sample G and the residual G all train; with
+    lambda_adversarial 0 the generators ignore the critics, so their update does not depend on
+    the critics' initialisation."""
+    data, fconf, fparams, _, _ = tiny_setup
+    config = dataclasses.replace(
+        TINY, epochs=1, critic_steps=2, gen_per_sample=True, gen_residual=True
+    )
+    state, metrics = jax.jit(train_lib.make_train(config, data, fparams, fconf.model))(
+        jax.random.PRNGKey(0)
+    )
+    assert np.isfinite(metrics["generator_total"]).all() and np.isfinite(metrics["critic_c"]).all()
+
+    no_adv = dataclasses.replace(TINY, epochs=1, lambda_adversarial=0.0)
+    trainer = train_lib.make_trainer(no_adv, data, fparams, fconf.model)
+    s0 = trainer.init(jax.random.PRNGKey(0))
+    other_critic = jax.tree.map(lambda v: v * 1.5, s0.params["critic"])
+    s1 = s0.replace(params={"gen": s0.params["gen"], "critic": other_critic})
+    run = jax.jit(trainer.run_epochs, static_argnums=3)
+    a, _ = run(s0, jax.random.PRNGKey(1), jnp.int32(0), 1)
+    b, _ = run(s1, jax.random.PRNGKey(1), jnp.int32(0), 1)
+    assert _params_equal(a.params["gen"], b.params["gen"])
+    assert not _params_equal(a.params["critic"], b.params["critic"])
 
 
 def test_two_devices_train_like_one(tiny_setup, tmp_path):
