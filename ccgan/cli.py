@@ -69,6 +69,14 @@ def cli_parser(module: str, doc: str) -> argparse.ArgumentParser:
     )
 
 
+def _boolean(text: str) -> bool:
+    """A flag value "true"/"false" (or "1"/"0", any case) as a bool."""
+    value = {"true": True, "1": True, "false": False, "0": False}.get(text.lower())
+    if value is None:
+        raise argparse.ArgumentTypeError(f"expected true or false, got {text!r}")
+    return value
+
+
 def add_config_flags(
     parser: argparse.ArgumentParser,
     cls,
@@ -103,7 +111,7 @@ def add_config_flags(
         if f.type in ("bool", bool):
             group.add_argument(flag, action="store_true", **kw)
         elif "tuple" in str(f.type):
-            typ = float if "float" in str(f.type) else int
+            typ = {"float": float, "bool": _boolean}.get(str(f.type)[6:-1].split(",")[0], int)
             # tuple[float, float] takes exactly two values; tuple[int, ...] one or more.
             nargs = "+" if "..." in str(f.type) else str(f.type).count(",") + 1
             group.add_argument(flag, type=typ, nargs=nargs, **kw | {"default": list(f.default)})

@@ -1,40 +1,48 @@
-"""Hyperparameter search for CCGAN-GP with Optuna (TPE, no pruning), stored in SQLite.
+"""The CCGAN-GP study: Optuna over the training settings, each trial scored in the D_c simulator.
 
 `python -m ccgan.tune --source S_train.npz S_val.npz --constrained C_train.npz C_val.npz
---n-trials 20 --epochs 20` searches lambda_cycle, lambda_feedback, both learning rates and the
-window length, minimising the validation tracking error (cm) that `ccgan.train` logs as
-`val_error_cm`: G_c translates the held-out D_s trajectories, F_c runs them open loop, and the
-error at the best hold factor k is the trial's value. Every trial trains one seed for `--epochs`
-epochs from the same key, so trials differ only in their hyperparameters.
+--model models/softarm.xml --forward-workdir DIR --n-trials 64 --trials-per-batch 16` searches the
+loss weights (adversarial is the reference, 1), both learning rates, the window length, the critic
+steps and the generator kind. A trial's value is the held-out tracking error in the target-domain
+simulator: its G_c translates the held-out D_s programs, each command is held k periods from rest
+in the D_c arm, every k-th pose is compared with the D_s poses, and k is chosen there from
+`--hold-factors` (`ccgan.sim_choice`, as the authors' code chooses it). The five shapes are never
+used.
 
-The study lives in an SQLite file (`--storage`, `--study-name`); rerunning the same command adds
-`--n-trials` more trials to it. The sampler's seed is `--seed` plus the number of trials already
-stored, so a resumed study does not replay the first trials' random start-up points. F_c is
-trained once per window length and cached beside the database, or read from
-`--forward-workdir/forward_c.ckpt` (as `ccgan.train` writes it) for every window length.
+Trials run in batches (`--trials-per-batch`): Optuna's ask/tell hands out a batch, whose settings
+differ only in numbers, so they train as one vmapped program (`ccgan.batch`). Each batch takes
+one structural combination (window length, critic steps, generator kind), in turn; TPE samples
+the numbers with the structure fixed (`optuna.samplers.PartialFixedSampler`). Every
+`--stretch-every` epochs each live trial is scored and reported; the median pruner stops those
+below the median of the finished trials at that epoch, which spares their simulator rollouts.
 
-Writes `tune.md`, `tune.json` and `tune_history.png` into `--report-dir`.
+The study lives in Optuna's own storage (`--storage`: an SQLite file, or with a `.log` suffix a
+journal file that processes on several machines can share), so trials can run in several
+processes or on several machines; rerunning the command adds `--n-trials` more. The sampler's seed
+is `--seed` plus the trials stored. Writes `tune.md`, `tune.json` and `tune_history.png` into
+`--report-dir`.
 """
 
 from __future__ import annotations
 
 import argparse
 import dataclasses
+import itertools
 import json
-import math
 import shlex
 import sys
 import time
+import warnings
 from pathlib import Path
 
 import jax
-import jax.numpy as jnp
 import numpy as np
 import optuna
 
 from ccgan import checkpoint
 from ccgan import data as data_lib
 from ccgan import forward as forward_lib
+from ccgan.batch import BatchTrainer
 from ccgan.cli import (
     add_config_flags,
     add_data_flags,
@@ -44,90 +52,79 @@ from ccgan.cli import (
     data_from_args,
 )
 from ccgan.config import TrainConfig, check_forward_config
+from ccgan.sim_choice import SimulatorChoice
 from ccgan.train import data_fingerprint
-from ccgan.trainer import make_trainer
 from mjx_arm.dataset import DatasetError
 from mjx_arm.machine import cpu_model
 from tracking.config import ConfigError, check_fields
 
-#: The TrainConfig fields the search sets; every other field comes from the base config.
-TUNED = ("lambda_cycle", "lambda_feedback", "lr_generator", "lr_critic", "window_length")
-#: The tuned fields that enter training only as numbers (not shapes): traced, not compiled in.
-CONTINUOUS = TUNED[:4]
+#: The TrainConfig fields sampled as numbers (log-uniform); they train vmapped in one batch.
+NUMERIC = ("lambda_cycle", "lambda_identity", "lambda_feedback", "lr_generator", "lr_critic")
+#: The TrainConfig fields that set a structure; one combination per batch.
+STRUCTURAL = ("window_length", "critic_steps", "gen_residual")
+#: Every TrainConfig field the search sets; every other field comes from the base config.
+TUNED = NUMERIC + STRUCTURAL
 
 
 @dataclasses.dataclass(frozen=True)
 class SearchSpace:
-    """Ranges of the searched hyperparameters (continuous ones are sampled log-uniformly)."""
+    """Ranges of the searched settings (numbers log-uniform, structures from lists)."""
 
     #: Range (low, high) of the cycle-loss weight lambda_c (paper code: 10).
-    lambda_cycle: tuple[float, float] = (1.0, 100.0)
+    lambda_cycle: tuple[float, float] = (0.1, 100.0)
+    #: Range of the identity-loss weight (paper: 1; the authors' code: none).
+    lambda_identity: tuple[float, float] = (0.01, 100.0)
     #: Range of the feedback-loss weight lambda_f (paper code: 5).
-    lambda_feedback: tuple[float, float] = (0.5, 50.0)
+    lambda_feedback: tuple[float, float] = (0.1, 100.0)
     #: Range of the generator learning rate (paper: 1e-4).
     lr_generator: tuple[float, float] = (1e-5, 1e-3)
     #: Range of the critic learning rate (paper: 2e-4).
     lr_critic: tuple[float, float] = (1e-5, 1e-3)
     #: Control steps per training window to choose from (each >= 2, as TrainConfig's).
-    window_lengths: tuple[int, ...] = (5, 10, 20)
+    window_lengths: tuple[int, ...] = (10, 20)
+    #: Critic updates per generator update to choose from.
+    critic_steps: tuple[int, ...] = (1, 5)
+    #: Generator kinds to choose from: False the paper's, True the residual one.
+    gen_residual: tuple[bool, ...] = (False, True)
 
     def __post_init__(self):
         """Refuses empty or inverted ranges (ConfigError names the field)."""
-        check_fields(self, above={n: 0 for n in CONTINUOUS}, at_least={"window_lengths": 2})
-        for name in CONTINUOUS:
+        check_fields(
+            self,
+            above={n: 0 for n in NUMERIC},
+            at_least={"window_lengths": 2, "critic_steps": 1},
+        )
+        for name in NUMERIC:
             value = getattr(self, name)
             if len(value) != 2 or value[0] > value[1]:
                 raise ConfigError(name, f"must be a range (low, high) with low <= high: {value}")
+        if not self.gen_residual:
+            raise ConfigError("gen_residual", "needs at least one generator kind")
+
+    def structures(self) -> list[dict]:
+        """Every structural combination, {field of STRUCTURAL: value}, in a fixed order."""
+        values = (self.window_lengths, self.critic_steps, self.gen_residual)
+        return [dict(zip(STRUCTURAL, v, strict=True)) for v in itertools.product(*values)]
 
 
 def suggest(trial: optuna.Trial, space: SearchSpace) -> dict:
     """Samples one point of `space`: {field of TUNED: value}."""
-    params = {
-        name: trial.suggest_float(name, *getattr(space, name), log=True) for name in CONTINUOUS
-    }
+    params = {name: trial.suggest_float(name, *getattr(space, name), log=True) for name in NUMERIC}
     params["window_length"] = int(trial.suggest_categorical("window_length", space.window_lengths))
+    params["critic_steps"] = int(trial.suggest_categorical("critic_steps", space.critic_steps))
+    params["gen_residual"] = bool(trial.suggest_categorical("gen_residual", space.gen_residual))
     return params
 
 
-def make_validation_run(
-    config: TrainConfig,
-    data: data_lib.TranslationData,
-    forward_c_params,
-    forward_model=None,
-):
-    """A jitted `run(key, hparams) -> (metrics {name: [epochs]}, errors per k [K])`.
+def storage_url(storage: str | Path):
+    """Optuna storage of a path: a journal file for `.log`, else an SQLite file."""
+    path = Path(storage).resolve()
+    if path.suffix == ".log":
+        from optuna.storages import JournalStorage
+        from optuna.storages.journal import JournalFileBackend
 
-    `run` is `make_train(config with hparams, ...)(key)` (same key split) followed by
-    `Trainer.validation_errors` on the final state. The CONTINUOUS fields of `hparams`
-    ({name: float scalar}) are traced arguments, so one compilation serves every trial with the
-    same window length (the window length sets array shapes).
-    """
-
-    @jax.jit
-    def run(key, hparams):
-        trainer = make_trainer(
-            dataclasses.replace(config, **hparams), data, forward_c_params, forward_model
-        )
-        init_key, run_key = jax.random.split(key)
-        state = trainer.init(init_key)
-        state, metrics = trainer.run_epochs(state, run_key, jnp.int32(0), config.epochs)
-        return metrics, trainer.validation_errors(state)
-
-    return run
-
-
-def validation_error_cm(run, config: TrainConfig, seed: int = 0) -> tuple[float, int, dict]:
-    """Trains one seed with `run` (from `make_validation_run`) at config's CONTINUOUS values.
-
-    Returns:
-      (min over hold_factors of the mean held-out tip error in cm, the k reaching it,
-       {metric: value at the last epoch}).
-    """
-    hparams = {n: jnp.float32(getattr(config, n)) for n in CONTINUOUS}
-    metrics, errs = jax.device_get(run(jax.random.PRNGKey(seed), hparams))
-    best = int(np.argmin(errs))
-    last = {name: float(v[-1]) for name, v in metrics.items() if name != "val_error_cm"}
-    return float(errs[best]), int(config.hold_factors[best]), last
+        return JournalStorage(JournalFileBackend(str(path)))
+    return f"sqlite:///{path}"
 
 
 class ForwardCache:
@@ -163,6 +160,7 @@ class ForwardCache:
 def run_study(
     base: TrainConfig,
     arrays: tuple,
+    arm_c,
     storage: str | Path,
     study_name: str,
     n_trials: int,
@@ -171,74 +169,124 @@ def run_study(
     forward_workdir=None,
     seed: int = 0,
     timeout_s: float | None = None,
+    trials_per_batch: int = 8,
+    backend: str = "c",
+    progress: bool = False,
 ) -> optuna.Study:
-    """Adds `n_trials` TPE trials to the study `study_name` in the SQLite file `storage`.
+    """Adds `n_trials` trials, in batches, to the study `study_name` in `storage`.
 
     Args:
-      base: every TrainConfig field not in TUNED (epochs is the per-trial budget).
+      base: every TrainConfig field not in TUNED (epochs is the per-trial budget,
+        stretch_every the scoring and pruning interval).
       arrays: (pressures_s, poses_s, pressures_c, poses_c, bounds or None), as
         `ccgan.data.read_translation_files` reads them.
-      storage: SQLite file (created with its folder; F_c caches go beside it).
-      study_name: the study's name in that file.
+      arm_c: the target-domain arm the data came from (the trials are scored in it).
+      storage: SQLite file, or journal file with a `.log` suffix (created with its folder; F_c
+        caches go beside it).
+      study_name: the study's name in that storage.
       n_trials: trials to run now (on top of those stored).
       space: search ranges.
       fconf: F_c settings (its network must match a `forward_workdir` checkpoint).
       forward_workdir: a `ccgan.train` workdir whose forward_c.ckpt to use, or None.
       seed: sampler seed (offset by the trials stored) and the training seed of every trial.
-      timeout_s: start no new trial after this many seconds (None: run all n_trials).
+      timeout_s: start no new batch after this many seconds (None: run all n_trials).
+      trials_per_batch: trials trained together as one vmapped program.
+      backend: the simulator of the scoring rollouts, "c" or "mjx".
+      progress: progress bars over the scoring rollouts.
 
     Returns:
       The study.
 
     Raises:
-      ValueError: n_trials < 1, or timeout_s given and not > 0.
+      ValueError: n_trials or trials_per_batch < 1, or timeout_s given and not > 0.
     """
-    if n_trials < 1:
-        raise ValueError(f"n_trials must be >= 1, got {n_trials}")
+    if n_trials < 1 or trials_per_batch < 1:
+        raise ValueError(
+            f"n_trials and trials_per_batch must be >= 1: {n_trials}, {trials_per_batch}"
+        )
     if timeout_s is not None and not timeout_s > 0:
         raise ValueError(f"timeout_s must be > 0 (or None), got {timeout_s}")
     check_forward_config(fconf)
     storage = Path(storage)
     storage.parent.mkdir(parents=True, exist_ok=True)
+    # Pruning compares a trial with the finished trials at the same epoch, so not before a whole
+    # batch has finished.
+    pruner = optuna.pruners.MedianPruner(n_startup_trials=trials_per_batch, n_warmup_steps=0)
     study = optuna.create_study(
         study_name=study_name,
-        storage=f"sqlite:///{storage.resolve()}",
+        storage=storage_url(storage),
         direction="minimize",
         load_if_exists=True,
+        pruner=pruner,
     )
-    study.sampler = optuna.samplers.TPESampler(seed=seed + len(study.trials))
     ps, xs, pc, xc, bounds = arrays
     cache_dir = storage.parent / f"{storage.stem}_{study_name}_cache"
     forward_c = ForwardCache(fconf, cache_dir, forward_workdir)
-    runs: dict[int, object] = {}
+    structures = space.structures()
+    prepared: dict[int, tuple] = {}
+    trainers: dict[tuple, BatchTrainer] = {}
+    start, added = time.perf_counter(), 0
+    optuna.logging.set_verbosity(optuna.logging.WARNING)
+    while added < n_trials:
+        if timeout_s is not None and time.perf_counter() - start > timeout_s:
+            break
+        n_batches = len({t.user_attrs.get("batch") for t in study.trials})
+        fixed = structures[n_batches % len(structures)]
+        tpe = optuna.samplers.TPESampler(seed=seed + len(study.trials))
+        with warnings.catch_warnings():  # PartialFixedSampler is marked experimental
+            warnings.simplefilter("ignore", optuna.exceptions.ExperimentalWarning)
+            study.sampler = optuna.samplers.PartialFixedSampler(fixed, tpe)
+        trials = [study.ask() for _ in range(min(trials_per_batch, n_trials - added))]
+        configs = [dataclasses.replace(base, **suggest(t, space)) for t in trials]
+        length = configs[0].window_length
+        if length not in prepared:
+            data = data_lib.prepare(ps, xs, pc, xc, length, base.n_val, None, bounds=bounds)
+            judge = SimulatorChoice(arm_c, data, configs[0], backend)
+            prepared[length] = (data, judge.stretch_only_errors())
+        data, stretch_only = prepared[length]
+        group = tuple(fixed.items())
+        if group not in trainers:
+            label = "scoring" if progress else None
+            judge = SimulatorChoice(arm_c, data, configs[0], backend, label)
+            trainers[group] = BatchTrainer(data, forward_c(data, length), judge, fconf.model)
+        trainer = trainers[group]
+        pruned: set[int] = set()
 
-    def objective(trial: optuna.Trial) -> float:
-        params = suggest(trial, space)
-        config = dataclasses.replace(base, **params)
-        length = config.window_length
-        if length not in runs:
-            data = data_lib.prepare(
-                ps, xs, pc, xc, length, config.n_val, config.stride, bounds=bounds
-            )
-            runs[length] = make_validation_run(config, data, forward_c(data, length), fconf.model)
-        err, k, last = validation_error_cm(runs[length], config, seed)
-        trial.set_user_attr("k", k)
-        trial.set_user_attr("last_epoch", {m: v for m, v in last.items() if math.isfinite(v)})
-        return err
+        def record(trial, epoch, k, errors_cm, stretch_only=stretch_only):
+            """The trial's scores at its last scored epoch, as user attributes."""
+            trial.set_user_attr("k", int(k))
+            trial.set_user_attr("epoch", int(epoch))
+            by_k = dict(zip(map(str, base.hold_factors), map(float, errors_cm), strict=True))
+            trial.set_user_attr("errors_cm", by_k)
+            trial.set_user_attr("stretch_only_cm", float(stretch_only[base.hold_factors.index(k)]))
 
-    def report(study: optuna.Study, trial: optuna.trial.FrozenTrial) -> None:
-        secs = (trial.datetime_complete - trial.datetime_start).total_seconds()
-        value = "failed" if trial.value is None else f"{trial.value:.4f} cm"
-        params = " ".join(f"{n}={_fmt(trial.params[n])}" for n in TUNED)
-        best = study.best_value if any(t.value is not None for t in study.trials) else float("nan")
+        def on_choice(epoch, index, k, error_cm, errors_cm, trials=trials, pruned=pruned):
+            for j, i in enumerate(index):
+                trials[i].report(float(error_cm[j].mean()), epoch)
+                if trials[i].should_prune():
+                    record(trials[i], epoch, k[j, 0], errors_cm[j, 0])
+                    study.tell(trials[i], state=optuna.trial.TrialState.PRUNED)
+                    pruned.add(int(i))
+            return np.asarray([i not in pruned for i in index])
+
+        for t in trials:
+            t.set_user_attr("batch", n_batches)
+        batch_start = time.perf_counter()
+        result = trainer.train(configs, (seed,), on_choice)
+        secs = time.perf_counter() - batch_start
+        for i, t in enumerate(trials):
+            if i not in pruned:
+                t.set_user_attr("batch_wall_s", secs)
+                record(t, result.epoch[i], result.k[i, 0], result.errors_cm[i, 0])
+                study.tell(t, float(result.error_cm[i, 0]))
+        added += len(trials)
+        done = [t for t in study.trials if t.value is not None]
+        best = min(t.value for t in done) if done else float("nan")
         print(
-            f"trial {trial.number}: {value} (k={trial.user_attrs.get('k')}) {params} "
-            f"[{secs:.1f} s, best {best:.4f} cm]",
+            f"batch {n_batches} ({fixed}): {len(trials)} trials, {len(pruned)} pruned,"
+            f" {secs:.0f} s; best so far {best:.3f} cm",
             flush=True,
         )
-
-    optuna.logging.set_verbosity(optuna.logging.WARNING)
-    study.optimize(objective, n_trials=n_trials, timeout=timeout_s, callbacks=[report])
     return study
 
 
@@ -246,7 +294,7 @@ def _n_stored(storage, study_name: str) -> int:
     """Trials already stored in the study (0 if the file or the study does not exist yet)."""
     if not Path(storage).exists():
         return 0
-    url = f"sqlite:///{Path(storage).resolve()}"
+    url = storage_url(storage)
     names = [s.study_name for s in optuna.get_all_study_summaries(url)]
     return (
         len(optuna.load_study(study_name=study_name, storage=url).trials)
@@ -263,25 +311,29 @@ def summary(study: optuna.Study, extra: dict) -> dict:
     """The study as a JSON-able dict: best trial, every trial, and `extra` (machine, command...)."""
     trials = []
     for t in study.trials:
-        secs = None
-        if t.datetime_complete and t.datetime_start:
-            secs = (t.datetime_complete - t.datetime_start).total_seconds()
         trials.append(
             {
                 "number": t.number,
                 "state": t.state.name,
                 "value_cm": t.value,
                 "params": t.params,
-                "k": t.user_attrs.get("k"),
-                "duration_s": secs,
-                "last_epoch": t.user_attrs.get("last_epoch"),
+                **{
+                    n: t.user_attrs.get(n)
+                    for n in ("batch", "batch_wall_s", "k", "epoch", "stretch_only_cm", "errors_cm")
+                },
             }
         )
     done = [t for t in study.trials if t.value is not None]
     best = None
     if done:
         b = study.best_trial
-        best = {"number": b.number, "value_cm": b.value, "params": b.params, "k": b.user_attrs["k"]}
+        best = {
+            "number": b.number,
+            "value_cm": b.value,
+            "params": b.params,
+            "k": b.user_attrs.get("k"),
+            "stretch_only_cm": b.user_attrs.get("stretch_only_cm"),
+        }
     return extra | {"study_name": study.study_name, "best": best, "trials": trials}
 
 
@@ -300,50 +352,66 @@ def write_report(summ: dict, report_dir: str | Path, note: str = "") -> dict[str
     paths["json"].write_text(json.dumps(summ | {"note": note}, indent=2) + "\n")
 
     done = [t for t in summ["trials"] if t["value_cm"] is not None]
-    fig, ax = plt.subplots(figsize=(6, 3.5))
+    fig, ax = plt.subplots(figsize=(6.5, 3.8))
     if done:
         x = [t["number"] for t in done]
         y = [t["value_cm"] for t in done]
-        ax.plot(x, y, "o", label="trial")
+        ax.plot(x, y, "o", label="trial (D_c simulator, its k)")
         ax.step(x, np.minimum.accumulate(y), where="post", label="best so far")
+        ax.plot(
+            x, [t["stretch_only_cm"] for t in done], "x", c="grey", label="stretch only, same k"
+        )
     ax.set_xlabel("trial")
-    ax.set_ylabel("validation tracking error (cm)")
+    ax.set_ylabel("held-out tracking error (cm)")
     ax.set_title(f"Optuna TPE: {summ['study_name']}")
-    ax.legend()
+    ax.legend(fontsize=8)
     fig.tight_layout()
     fig.savefig(paths["png"], dpi=120)
     plt.close(fig)
 
-    lines = [f"# CCGAN-GP hyperparameter search: {summ['study_name']}", ""]
+    base = summ["base_config"]
+    lines = [f"# CCGAN-GP study: {summ['study_name']}", ""]
     if note:
         lines += [note, ""]
+    n_pruned = sum(t["state"] == "PRUNED" for t in summ["trials"])
     lines += [
         f"- Command: `{summ['command']}`",
         f"- Machine: {summ['machine']} ({summ['device_kind']})",
-        f"- This run: {summ['new_trials']} trials in {summ['wall_time_s']:.0f} s wall time; "
-        f"study: {len(summ['trials'])} trials in `{summ['storage']}`",
-        f"- Budget per trial: {summ['base_config']['epochs']} epochs, one seed; objective: "
-        "held-out tracking error through F_c at the best k (cm), as `val_error_cm` in "
-        "`ccgan.train`",
-        f"- Sampler: TPE, seed {summ['seed']} (+ trials already stored), no pruning",
+        f"- This run: {summ['new_trials']} trials in {summ['wall_time_s']:.0f} s wall time"
+        f" ({summ['wall_time_s'] / 60:.1f} device-minutes); study: {len(summ['trials'])} trials"
+        f" ({n_pruned} pruned) in `{summ['storage']}`",
+        f"- Budget per trial: {base['epochs']} epochs, seed {summ['seed']}; scored and pruned"
+        f" every {base['stretch_every']} epochs",
+        f"- Objective: mean X_err (cm) of the {base['n_val']} held-out D_s programs' first"
+        f" {base['k_choice_seconds']:g} s, translated by G_c and held k periods from rest in the"
+        f" D_c simulator, at the k of {tuple(base['hold_factors'])} that scores best"
+        " (`ccgan.sim_choice`). Stretch only: the untranslated programs at that k.",
+        f"- Sampler: TPE, seed {summ['seed']} (+ trials already stored), one structure per batch"
+        " of trials; median pruner",
         "",
     ]
     if summ["best"]:
         b = summ["best"]
-        lines += [f"Best: trial {b['number']}, {b['value_cm']:.4f} cm at k = {b['k']}", ""]
-        lines += ["| parameter | value |", "|---|---|"]
+        lines += [
+            f"Best: trial {b['number']}, {b['value_cm']:.3f} cm at k = {b['k']}"
+            f" (stretch only at that k: {b['stretch_only_cm']:.3f} cm)",
+            "",
+            "| parameter | value |",
+            "|---|---|",
+        ]
         lines += [f"| {n} | {_fmt(b['params'][n])} |" for n in TUNED]
         lines += [""]
-    head = ["trial", "state", "error (cm)", "k", *TUNED, "time (s)"]
+    head = ["trial", "state", "error (cm)", "k", "stretch only (cm)", *TUNED, "batch"]
     lines += ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
     for t in summ["trials"]:
         row = [
             str(t["number"]),
             t["state"],
-            "" if t["value_cm"] is None else f"{t['value_cm']:.4f}",
+            "" if t["value_cm"] is None else f"{t['value_cm']:.3f}",
             str(t["k"]),
+            "" if t["stretch_only_cm"] is None else f"{t['stretch_only_cm']:.3f}",
             *(_fmt(t["params"].get(n, "")) for n in TUNED),
-            "" if t["duration_s"] is None else f"{t['duration_s']:.1f}",
+            str(t["batch"]),
         ]
         lines.append("| " + " | ".join(row) + " |")
     lines += ["", f"![optimisation history]({paths['png'].name})", ""]
@@ -355,11 +423,19 @@ def build_parser() -> argparse.ArgumentParser:
     """The options of `python -m ccgan.tune`."""
     parser = cli_parser("ccgan.tune", __doc__)
     add_data_flags(parser)
-    parser.add_argument("--storage", default="runs/tune/tune.db", help="SQLite file")
+    parser.add_argument(
+        "--storage", default="runs/tune/tune.db", help="SQLite file, or a .log journal file"
+    )
     parser.add_argument("--study-name", default="ccgan", help="the study's name in --storage")
-    parser.add_argument("--n-trials", type=int, default=10, help="trials to add in this run")
+    parser.add_argument("--n-trials", type=int, default=16, help="trials to add in this run")
+    parser.add_argument(
+        "--trials-per-batch", type=int, default=8, help="trials trained as one vmapped program"
+    )
     parser.add_argument("--seed", type=int, default=0, help="sampler and training seed")
-    parser.add_argument("--timeout-s", type=float, default=None, help="no new trial after this")
+    parser.add_argument("--timeout-s", type=float, default=None, help="no new batch after this")
+    parser.add_argument(
+        "--backend", choices=("c", "mjx"), default="c", help="simulator of the scoring rollouts"
+    )
     parser.add_argument(
         "--report-dir", default="runs/tune", help="folder for tune.md, .json, _history.png"
     )
@@ -367,11 +443,12 @@ def build_parser() -> argparse.ArgumentParser:
         "--forward-workdir", default=None, help="reuse DIR/forward_c.ckpt (a ccgan.train workdir)"
     )
     parser.add_argument("--note", default="", help="a paragraph put at the top of tune.md")
+    parser.add_argument("--no-progress", action="store_true", help="no progress bars")
     add_config_flags(parser, forward_lib.ForwardConfig, prefix="forward-")
     add_config_flags(parser, SearchSpace, prefix="space-")
     add_config_flags(parser, TrainConfig, skip=TUNED)
-    # The trial's value is the F_c error at the best k, so k is chosen through F_c in training too.
-    parser.set_defaults(epochs=5, k_choice="forward")
+    # A reduced budget per trial, scored (and pruned) twice.
+    parser.set_defaults(epochs=50, stretch_every=25)
     return parser
 
 
@@ -380,6 +457,8 @@ def main(argv=None) -> None:
 
     Every option and data file is checked before any trial runs (usage errors, status 2).
     """
+    import mjx_arm
+
     parser = build_parser()
     args = parser.parse_args(argv)
     base = config_from_args(parser, args, TrainConfig, skip=TUNED)
@@ -389,12 +468,14 @@ def main(argv=None) -> None:
     space = config_from_args(parser, args, SearchSpace, prefix="space-")
     if args.n_trials < 1:
         parser.error(f"--n-trials must be >= 1, got {args.n_trials}")
+    if args.trials_per_batch < 1:
+        parser.error(f"--trials-per-batch must be >= 1, got {args.trials_per_batch}")
     if args.timeout_s is not None and not args.timeout_s > 0:
         parser.error(f"--timeout-s must be > 0, got {args.timeout_s}")
     check_output_dir(parser, "--report-dir", args.report_dir)
     check_output_dir(parser, "--storage's folder", Path(args.storage).parent)
     if Path(args.storage).is_dir():
-        parser.error(f"--storage {args.storage} is a folder, not an SQLite file")
+        parser.error(f"--storage {args.storage} is a folder, not a storage file")
     if args.forward_workdir is not None:
         fc = Path(args.forward_workdir) / "forward_c.ckpt"
         if not fc.is_file():
@@ -406,13 +487,26 @@ def main(argv=None) -> None:
         parser.error(str(err))
     for note in split_notes:
         print(f"NOTE: {note}", file=sys.stderr)
+    try:
+        arm_c = mjx_arm.load(args.model, domain=d_c.domain)
+    except (FileNotFoundError, ValueError) as err:
+        parser.error(f"--model {args.model}: {err}")
+    if arm_c.model_hash != d_c.model_hash:
+        parser.error(
+            f"the trials are scored in {arm_c.path} (model hash {arm_c.model_hash}), but the"
+            f" data come from an arm with hash {d_c.model_hash}: pass that arm's MJCF as --model"
+        )
     bounds = data_lib.union_bounds(d_s.bounds, d_c.bounds)
 
+    from mjx_arm.machine import enable_compilation_cache
+
+    enable_compilation_cache()
     start = time.perf_counter()
     n_before = _n_stored(args.storage, args.study_name)
     study = run_study(
         base,
         (d_s.pressures_bar, d_s.poses, d_c.pressures_bar, d_c.poses, bounds),
+        arm_c,
         args.storage,
         args.study_name,
         args.n_trials,
@@ -421,6 +515,9 @@ def main(argv=None) -> None:
         args.forward_workdir,
         args.seed,
         args.timeout_s,
+        args.trials_per_batch,
+        args.backend,
+        progress=not args.no_progress,
     )
     extra = {
         "command": "python -m ccgan.tune " + shlex.join(sys.argv[1:] if argv is None else argv),
