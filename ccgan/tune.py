@@ -337,21 +337,13 @@ def summary(study: optuna.Study, extra: dict) -> dict:
     return extra | {"study_name": study.study_name, "best": best, "trials": trials}
 
 
-def write_report(summ: dict, report_dir: str | Path, note: str = "") -> dict[str, Path]:
-    """Writes tune.md, tune.json and tune_history.png; returns their paths."""
+def _plot_history(done: list[dict], study_name: str, path: Path) -> None:
+    """The trials' values and the best so far, beside stretch only at each trial's k."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    out = Path(report_dir)
-    out.mkdir(parents=True, exist_ok=True)
-    paths = {
-        k: out / f"tune{s}" for k, s in (("md", ".md"), ("json", ".json"), ("png", "_history.png"))
-    }
-    paths["json"].write_text(json.dumps(summ | {"note": note}, indent=2) + "\n")
-
-    done = [t for t in summ["trials"] if t["value_cm"] is not None]
     fig, ax = plt.subplots(figsize=(6.5, 3.8))
     if done:
         x = [t["number"] for t in done]
@@ -363,11 +355,27 @@ def write_report(summ: dict, report_dir: str | Path, note: str = "") -> dict[str
         )
     ax.set_xlabel("trial")
     ax.set_ylabel("held-out tracking error (cm)")
-    ax.set_title(f"Optuna TPE: {summ['study_name']}")
+    ax.set_title(f"Optuna TPE: {study_name}")
     ax.legend(fontsize=8)
     fig.tight_layout()
-    fig.savefig(paths["png"], dpi=120)
+    fig.savefig(path, dpi=120)
     plt.close(fig)
+
+
+def write_report(summ: dict, report_dir: str | Path, note: str = "") -> dict[str, Path]:
+    """Writes tune.md, tune.json and tune_history.png; returns their paths."""
+    out = Path(report_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    paths = {
+        k: out / f"tune{s}" for k, s in (("md", ".md"), ("json", ".json"), ("png", "_history.png"))
+    }
+    paths["json"].write_text(json.dumps(summ | {"note": note}, indent=2) + "\n")
+
+    done = [t for t in summ["trials"] if t["value_cm"] is not None]
+    try:
+        _plot_history(done, summ["study_name"], paths["png"])
+    except ImportError:  # a GPU image without matplotlib: the tables still get written
+        paths.pop("png")
 
     base = summ["base_config"]
     lines = [f"# CCGAN-GP study: {summ['study_name']}", ""]
@@ -414,7 +422,9 @@ def write_report(summ: dict, report_dir: str | Path, note: str = "") -> dict[str
             str(t["batch"]),
         ]
         lines.append("| " + " | ".join(row) + " |")
-    lines += ["", f"![optimisation history]({paths['png'].name})", ""]
+    if "png" in paths:
+        lines += ["", f"![optimisation history]({paths['png'].name})"]
+    lines += [""]
     paths["md"].write_text("\n".join(lines))
     return paths
 

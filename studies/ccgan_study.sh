@@ -1,0 +1,65 @@
+#!/usr/bin/env bash
+# Runs ON THE GPU MACHINE (the device tool's `run`): the CCGAN-GP study of issue 29 on the committed
+# arm, resumable across calls. Each call does what is missing, in order, and returns everything as
+# $OUT/ccgan_study.tar.gz (unpack it into studies/results/<machine>/ and commit it):
+#   1. babbling at the paper's scale in D_s and D_c (MuJoCo C on the host's cores: 53 x 60 s per
+#      domain take seconds there, where MJX compiles for a minute);
+#   2. F_s and F_c (`ccgan.train --forward-only`);
+#   3. trials of `ccgan.tune` until STUDY_SECONDS (default 300) have passed, in batches of
+#      TRIALS_PER_BATCH (default 16), each trial scored in the D_c simulator.
+# Call sequence (nvidia-h100-x1, timeout_s 600), back to back while the machine is warm:
+#   1. carry [".whl"] (bench/device/fetch_wheels.sh): bash studies/ccgan_study.sh install
+#   2. carry [".whl-optuna"] (pip download optuna and matplotlib for Python 3.12 into it; optuna is
+#      not on the GPU image), with the previous calls' ccgan_study/ folder in the tree:
+#      STUDY_SECONDS=300 bash studies/ccgan_study.sh
+set -uo pipefail
+source "$(dirname "${BASH_SOURCE[0]}")/../bench/device/install.sh" || exit 1
+if compgen -G ".whl-optuna/*.whl" >/dev/null; then
+  for whl in .whl-optuna/*.whl; do
+    name=$(basename "$whl" | cut -d- -f1 | tr '[:upper:]' '[:lower:]')
+    $PY -c "import importlib.metadata as m; m.version('$name')" >/dev/null 2>&1 && continue
+    $PY -m pip install -q --no-index --no-deps --no-compile --target "$SITE" "$whl" || exit 1
+  done
+  echo "optuna: $($PY -c 'import optuna; print(optuna.__version__)')"
+fi
+$PY - <<'PYEOF'
+from importlib import metadata
+for d in ("optuna", "sqlalchemy", "alembic", "matplotlib", "tqdm", "flax", "optax"):
+    try:
+        print(f"  {d} {metadata.version(d)}")
+    except metadata.PackageNotFoundError:
+        print(f"  {d} -")
+PYEOF
+[[ ${1:-} == install ]] && exit 0
+
+echo "$(nproc) cores; $(nvidia-smi -L 2>/dev/null | head -1)"
+# The study's folder: the one a previous call returned (committed under studies/results/), else new.
+STUDY=${STUDY_DIR:-studies/results/h100/ccgan_study}
+RUN=$TMP/ccgan_study
+mkdir -p "$RUN"
+[[ -d $STUDY ]] && cp -a "$STUDY"/. "$RUN"/
+MODEL=models/softarm.xml
+DATA="--source $RUN/babble/source_train.npz $RUN/babble/source_val.npz
+      --constrained $RUN/babble/constrained_train.npz $RUN/babble/constrained_val.npz"
+start=$SECONDS
+if [[ ! -f $RUN/babble/manifest.json ]]; then
+  $PY -m mjx_arm.babble --preset paper --domain both --seed 0 --backend c --model $MODEL \
+    --out "$RUN/babble" --no-progress || exit 1
+  echo "babble: $((SECONDS - start)) s"
+fi
+if [[ ! -f $RUN/forward/forward_c.ckpt ]]; then
+  $PY -m ccgan.train $DATA --model $MODEL --workdir "$RUN/forward" --forward-only --no-progress \
+    || exit 1
+  echo "forward: $((SECONDS - start)) s"
+fi
+# No new batch after STUDY_SECONDS; a batch in flight when the call's limit nears is cut by
+# `timeout` (its trials stay RUNNING in the storage and are not counted), so the files come back.
+hard=$((${CALL_SECONDS:-560} - (SECONDS - start) - 15))
+timeout "$hard" $PY -m ccgan.tune $DATA --model $MODEL \
+  --forward-workdir "$RUN/forward" --storage "$RUN/study.db" --study-name ccgan_paper_scale \
+  --n-trials 256 --trials-per-batch "${TRIALS_PER_BATCH:-16}" --timeout-s "${STUDY_SECONDS:-300}" \
+  --epochs 40 --stretch-every 20 --hold-factors 10 15 20 --k-choice-seconds 20 \
+  --report-dir "$RUN/report" --no-progress
+echo "study call: $((SECONDS - start)) s"
+tar -czf "$OUT/ccgan_study.tar.gz" -C "$TMP" ccgan_study
+ls -la "$OUT"
