@@ -141,8 +141,16 @@ class ForwardCache:
         conf = dataclasses.asdict(self.fconf)
         if self.workdir is not None:
             # F_c maps one control period to the next, so any window length's F_c serves; only
-            # the network shape must match.
-            params, _ = checkpoint.load(self.workdir / "forward_c.ckpt", expect={"config": conf})
+            # the network shape must match (--forward-hidden, --forward-fc).
+            path = self.workdir / "forward_c.ckpt"
+            params, meta = checkpoint.load(path)
+            stored = meta.get("config", {})
+            for name in ("hidden", "fc"):
+                if stored.get(name) != conf[name]:
+                    raise checkpoint.CheckpointError(
+                        f"{path}: F_c {name} {stored.get(name)}, this run {conf[name]}"
+                        f" (--forward-{name})"
+                    )
         else:
             path = self.cache_dir / f"forward_c_L{window_length}.ckpt"
             meta = {"config": conf, "data": data_fingerprint(data)}
@@ -386,7 +394,8 @@ def write_report(summ: dict, report_dir: str | Path, note: str = "") -> dict[str
         f"- Command: `{summ['command']}`",
         f"- Machine: {summ['machine']} ({summ['device_kind']})",
         f"- This run: {summ['new_trials']} trials in {summ['wall_time_s']:.0f} s wall time"
-        f" ({summ['wall_time_s'] / 60:.1f} device-minutes); study: {len(summ['trials'])} trials"
+        f" ({summ['wall_time_s'] / 60:.1f} min of this machine); study:"
+        f" {len(summ['trials'])} trials"
         f" ({n_pruned} pruned) in `{summ['storage']}`",
         f"- Budget per trial: {base['epochs']} epochs, seed {summ['seed']}; scored and pruned"
         f" every {base['stretch_every']} epochs",
