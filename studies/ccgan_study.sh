@@ -12,6 +12,8 @@
 #   2. carry [".whl-optuna"] (pip download optuna and matplotlib for Python 3.12 into it; optuna is
 #      not on the GPU image), with the previous calls' ccgan_study/ folder in the tree:
 #      STUDY_SECONDS=300 bash studies/ccgan_study.sh
+#   or, after the study: bash studies/ccgan_study.sh budget --batch 0 --max-trials 8 --epochs 160
+#      --stretch-every 40 (studies.ccgan_budget: the study's budget against a longer training)
 set -uo pipefail
 source "$(dirname "${BASH_SOURCE[0]}")/../bench/device/install.sh" || exit 1
 if compgen -G ".whl-optuna/*.whl" >/dev/null; then
@@ -31,6 +33,11 @@ for d in ("optuna", "sqlalchemy", "alembic", "matplotlib", "tqdm", "flax", "opta
         print(f"  {d} -")
 PYEOF
 [[ ${1:-} == install ]] && exit 0
+if [[ ${1:-} == budget ]]; then # studies.ccgan_budget on the committed study folder
+  $PY -m studies.ccgan_budget --study-dir studies/results/h100/ccgan_study "${@:2}" \
+    --out "$OUT/ccgan_budget"
+  exit
+fi
 
 echo "$(nproc) cores; $(nvidia-smi -L 2>/dev/null | head -1)"
 # The study's folder: the one a previous call returned (committed under studies/results/), else new.
