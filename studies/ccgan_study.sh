@@ -9,6 +9,8 @@
 #      TRIALS_PER_BATCH (default 16), each trial scored in the D_c simulator.
 # Call sequence (nvidia-h100-x1, timeout_s 600), back to back while the machine is warm:
 #   1. carry [".whl"] (bench/device/fetch_wheels.sh): bash studies/ccgan_study.sh install
+#      (or, when the tree and .whl pass 64 MiB: carry [".whl-extra1"] holding the mujoco and glfw
+#      wheels, then [".whl-extra2", ".whl-optuna"] holding mujoco-mjx, pyopengl and trimesh)
 #   2. carry [".whl-optuna"] (pip download optuna and matplotlib for Python 3.12 into it; optuna is
 #      not on the GPU image), with the previous calls' ccgan_study/ folder in the tree:
 #      STUDY_SECONDS=300 bash studies/ccgan_study.sh
@@ -16,13 +18,15 @@
 #      --stretch-every 40 (studies.ccgan_budget: the study's budget against a longer training)
 set -uo pipefail
 source "$(dirname "${BASH_SOURCE[0]}")/../bench/device/install.sh" || exit 1
-if compgen -G ".whl-optuna/*.whl" >/dev/null; then
-  for whl in .whl-optuna/*.whl; do
+# Wheels carried in folders of their own (.whl-optuna, or .whl cut in two as .whl-extra1 and
+# .whl-extra2 when the tree and .whl together pass the 64 MiB a call carries), each installed
+# unless already there.
+if compgen -G ".whl-[oe]*/*.whl" >/dev/null; then
+  for whl in .whl-[oe]*/*.whl; do
     name=$(basename "$whl" | cut -d- -f1 | tr '[:upper:]' '[:lower:]')
     $PY -c "import importlib.metadata as m; m.version('$name')" >/dev/null 2>&1 && continue
     $PY -m pip install -q --no-index --no-deps --no-compile --target "$SITE" "$whl" || exit 1
   done
-  echo "optuna: $($PY -c 'import optuna; print(optuna.__version__)')"
 fi
 $PY - <<'PYEOF'
 from importlib import metadata
