@@ -25,7 +25,9 @@ if compgen -G ".whl-[oe]*/*.whl" >/dev/null; then
   for whl in .whl-[oe]*/*.whl; do
     name=$(basename "$whl" | cut -d- -f1 | tr '[:upper:]' '[:lower:]')
     $PY -c "import importlib.metadata as m; m.version('$name')" >/dev/null 2>&1 && continue
-    $PY -m pip install -q --no-index --no-deps --no-compile --target "$SITE" "$whl" || exit 1
+    # Into a folder of its own, then merged: mujoco-mjx adds mujoco/mjx to mujoco's folder.
+    rm -rf "$TMP/one" && $PY -m pip install -q --no-index --no-deps --no-compile --target \
+      "$TMP/one" "$whl" && cp -a "$TMP/one/." "$SITE/" || exit 1
   done
 fi
 $PY - <<'PYEOF'
