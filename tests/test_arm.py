@@ -144,6 +144,7 @@ def test_out_of_range_pressures_saturate_like_a_valve(small_xml):
     np.testing.assert_array_equal(arm.rollout(wild, backend="c"), arm.rollout(clipped, backend="c"))
 
 
+@pytest.mark.slow
 def test_twenty_segment_mjx_step_on_cpu_is_fast():
     """The CPU trap: without the XLA flag one 20-segment step takes minutes."""
     import jax

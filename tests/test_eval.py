@@ -161,6 +161,7 @@ def test_default_translator_finds_its_trained_seeds(tmp_path, monkeypatch):
     assert bool(tr.trained_seeds) == committed.exists()
 
 
+@pytest.mark.slow
 def test_mpc_method_and_the_oracle_starting_from_it(small_xml, tmp_path, capsys):
     """The mpc row is the receding-horizon tracker's; the oracle starts from its commands."""
     cfg = pipeline.EvalConfig(

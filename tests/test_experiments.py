@@ -339,9 +339,12 @@ def test_report_checks_each_target_shape_by_shape():
     assert "| circle | 2.98 / 0.276 | 7.14 / 0.636 | 0.90 / 0.100 |" in "\n".join(table)
 
 
-def test_quick_chain_runs_end_to_end_then_skips_everything(tmp_path, capsys):
+def test_quick_chain_runs_end_to_end_then_skips_everything(tmp_path, capsys, monkeypatch):
     """The committed quick config, every stage for real (tiny babbling, training, distillation,
     evaluation), two at a time, then the same command again: nothing reruns."""
+    # The stages share a compile cache of their own, as a user's chain does by default: stages
+    # of equal shapes (the two pairs' trainings) compile once.
+    monkeypatch.setenv("SOFTARM_JAX_CACHE", str(tmp_path / "jax_cache"))
     config = paper.REPO / "experiments" / "quick.json"
     argv = ["--out", str(tmp_path / "run"), "--config", str(config), "--jobs", "2"]
     assert paper.main(argv) == 0

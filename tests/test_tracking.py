@@ -104,6 +104,7 @@ def test_stretch_and_every_kth():
     np.testing.assert_array_equal(held.every_kth(poses, 4)[:, 0], [3, 7, 11])
 
 
+@pytest.mark.slow
 def test_oracle_lowers_the_loss_and_batches_like_one_program(small_xml, tmp_path):
     """Adam through the MJX rollout: better than its start, in the valve range, and two programs
     optimised together get exactly the iterates each gets alone (Adam acts elementwise)."""
