@@ -339,6 +339,7 @@ def test_report_checks_each_target_shape_by_shape():
     assert "| circle | 2.98 / 0.276 | 7.14 / 0.636 | 0.90 / 0.100 |" in "\n".join(table)
 
 
+@pytest.mark.slow
 def test_quick_chain_runs_end_to_end_then_skips_everything(tmp_path, capsys, monkeypatch):
     """The committed quick config, every stage for real (tiny babbling, training, distillation,
     evaluation), two at a time, then the same command again: nothing reruns."""
