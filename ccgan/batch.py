@@ -29,7 +29,7 @@ from ccgan.config import TrainConfig
 from ccgan.data import TranslationData
 from ccgan.models import ForwardModel
 from ccgan.sim_choice import SimulatorChoice
-from ccgan.trainer import make_trainer
+from ccgan.trainer import init_each, make_trainer
 
 #: The TrainConfig fields that enter training only as numbers: traced, so settings differing
 #: only in them train in one compiled, vmapped program.
@@ -92,8 +92,8 @@ class BatchTrainer:
         self._programs: dict[TrainConfig, tuple] = {}
 
     def _compiled(self, static: TrainConfig):
-        """(init(key, hparams), run(state, key, start, hparams, n)), jitted and vmapped over
-        members, for one group; compiled once per group and epoch count."""
+        """(init(key, hparams) for one member, run(state, key, start, hparams, n) jitted and
+        vmapped over members) for one group; `init_each` initialises the members."""
         if static not in self._programs:
 
             def trainer(hparams):
@@ -107,7 +107,7 @@ class BatchTrainer:
                 return trainer(hparams).run_epochs(state, key, start, n_epochs)
 
             self._programs[static] = (
-                jax.jit(jax.vmap(init)),
+                init,
                 jax.jit(jax.vmap(run, in_axes=(0, 0, None, 0, None)), static_argnums=4),
             )
         return self._programs[static]
@@ -151,7 +151,7 @@ class BatchTrainer:
         keys = jax.vmap(jax.random.PRNGKey)(jnp.asarray(list(seeds) * n_cfg))
         init_keys, run_keys = jnp.swapaxes(jax.vmap(jax.random.split)(keys), 0, 1)
         init, run = self._compiled(static)
-        state = init(init_keys, hparams)
+        state = init_each(init, init_keys, hparams)
 
         n_k = len(static.hold_factors)
         k = np.full((n_cfg, n_seeds), static.hold_factors[0])

@@ -55,6 +55,7 @@ from ccgan.trainer import (  # noqa: F401
     TrainState,
     check_data,
     generator,
+    init_each,
     make_train,
     make_trainer,
     resolved_feedback_impl,
@@ -254,7 +255,7 @@ def _initial_states(trainer: Trainer, seeds: tuple[int, ...]):
     """
     keys = jax.vmap(jax.random.PRNGKey)(jnp.asarray(seeds))
     init_keys, run_keys = jnp.swapaxes(jax.vmap(jax.random.split)(keys), 0, 1)
-    return jax.jit(jax.vmap(trainer.init))(init_keys), run_keys
+    return init_each(trainer.init, init_keys), run_keys
 
 
 def _resumed(ckpt_path: Path, csv_path: Path, state: TrainState, expect: dict):

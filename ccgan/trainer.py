@@ -413,6 +413,22 @@ def make_trainer(
     return Trainer(init=init, run_epochs=run_epochs, validation_errors=validation_errors)
 
 
+def init_each(init, keys, *args):
+    """Initial states of several members, [M, ...] stacked: `init(keys[m], *(a[m] for a in
+    args))` one member at a time (one compiled initialiser, called M times).
+
+    Not `vmap(init)`: under vmap the LSTMs' orthogonal initialisation becomes a batched QR, which
+    jaxlib runs on CPU through `jax::ParallelBatchMap`, and on a 2-core CPU that call has been
+    seen to wait forever for its pool threads (three members, jaxlib 0.10.2).
+    """
+    one = jax.jit(init)
+    states = [
+        one(keys[m], *(jax.tree.map(lambda x, m=m: x[m], a) for a in args))
+        for m in range(len(keys))
+    ]
+    return jax.tree.map(lambda *x: jnp.stack(x), *states)
+
+
 def make_train(
     config: TrainConfig,
     data: TranslationData,
