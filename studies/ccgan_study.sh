@@ -10,7 +10,8 @@
 # Call sequence (nvidia-h100-x1, timeout_s 600), back to back while the machine is warm:
 #   1. carry [".whl"] (bench/device/fetch_wheels.sh): bash studies/ccgan_study.sh install
 #      (or, when the tree and .whl pass 64 MiB: carry [".whl-extra1"] holding the mujoco and glfw
-#      wheels, then [".whl-extra2", ".whl-optuna"] holding mujoco-mjx, pyopengl and trimesh)
+#      wheels, then [".whl-extra2", ".whl-optuna"] holding mujoco-mjx, pyopengl and trimesh, each
+#      folder with a copy of .whl/SHA256SUMS; install.sh installs once all are staged)
 #   2. carry [".whl-optuna"] (pip download optuna and matplotlib for Python 3.12 into it; optuna is
 #      not on the GPU image), with the previous calls' ccgan_study/ folder in the tree:
 #      STUDY_SECONDS=300 bash studies/ccgan_study.sh
@@ -18,11 +19,9 @@
 #      --stretch-every 40 (studies.ccgan_budget: the study's budget against a longer training)
 set -uo pipefail
 source "$(dirname "${BASH_SOURCE[0]}")/../bench/device/install.sh" || exit 1
-# Wheels carried in folders of their own (.whl-optuna, or .whl cut in two as .whl-extra1 and
-# .whl-extra2 when the tree and .whl together pass the 64 MiB a call carries), each installed
-# unless already there.
-if compgen -G ".whl-[oe]*/*.whl" >/dev/null; then
-  for whl in .whl-[oe]*/*.whl; do
+# optuna and its needs (not on the GPU image), each wheel installed unless already there.
+if compgen -G ".whl-optuna/*.whl" >/dev/null; then
+  for whl in .whl-optuna/*.whl; do
     name=$(basename "$whl" | cut -d- -f1 | tr '[:upper:]' '[:lower:]')
     $PY -c "import importlib.metadata as m; m.version('$name')" >/dev/null 2>&1 && continue
     # Into a folder of its own, then merged: mujoco-mjx adds mujoco/mjx to mujoco's folder.

@@ -1,7 +1,10 @@
 # Sourced ON THE GPU MACHINE by bench/device/on_device.sh and experiments/device.sh, from the
 # repository root of the copy sent there: installs what the call carried, no network needed.
 #
-# (1) stages the carried wheel folders: .whl/ -> $TMP/whl/, .whl-warpN/ -> $TMP/wp/;
+# (1) stages the carried wheel folders: .whl/ or its two halves .whl-extra1/ and .whl-extra2/ (for
+#     a tree too large to travel beside the whole .whl: mujoco and glfw in one, mujoco-mjx, pyopengl
+#     and trimesh in the other, each with a copy of .whl/SHA256SUMS; carried in two calls while
+#     the machine stays warm) -> $TMP/whl/, .whl-warpN/ -> $TMP/wp/;
 # (2) installs the mujoco wheels once (sha256 checked) with
 #     pip install --no-index --no-deps --target $TMP/site;
 # (3) once $TMP/wp holds every piece of the warp-lang wheel (the joined file's sha256 matches),
@@ -25,6 +28,13 @@ if compgen -G ".whl/*.whl" >/dev/null; then
   cp -f .whl/* "$WHL/"
   echo "staged $(ls .whl/*.whl | wc -l) mujoco wheels"
 fi
+# .whl cut in two (.whl-extra1, .whl-extra2, each with a copy of SHA256SUMS) for a tree too large
+# to travel beside the whole .whl: staged call by call, installed once every wheel is here.
+for dir in .whl-extra[0-9]*; do
+  [[ -d $dir ]] || continue
+  cp -f "$dir"/* "$WHL/"
+  echo "staged $(ls "$dir"/*.whl | wc -l) mujoco wheel(s) from $dir"
+done
 for dir in .whl-warp[0-9]*; do
   [[ -d $dir ]] || continue
   cp -f "$dir"/* "$WP/"
@@ -33,7 +43,10 @@ done
 
 # (2) mujoco, mujoco-mjx and their missing needs.
 if ! $PY -c "import mujoco.mjx" >/dev/null 2>&1; then
-  if compgen -G "$WHL/*.whl" >/dev/null; then
+  if compgen -G "$WHL/*.whl" >/dev/null && ! (cd "$WHL" && sha256sum -c --quiet SHA256SUMS) \
+    >/dev/null 2>&1 && (cd "$WHL" && sha256sum -c SHA256SUMS 2>&1 | grep -q "No such file"); then
+    echo "mujoco wheels staged so far: $(cd "$WHL" && ls -- *.whl | tr '\n' ' ')(not all yet)"
+  elif compgen -G "$WHL/*.whl" >/dev/null; then
     (cd "$WHL" && sha256sum -c --quiet SHA256SUMS) || { echo "mujoco wheels: bad sha256"; exit 1; }
     $PY -m pip install -q --no-index --no-deps --no-compile --no-cache-dir --upgrade \
       --target "$SITE" "$WHL"/*.whl || exit 1
