@@ -370,6 +370,34 @@ def _plot_history(done: list[dict], study_name: str, path: Path) -> None:
     plt.close(fig)
 
 
+def structure_lines(trials: list[dict]) -> list[str]:
+    """A table of the trials by structure: count, pruned, best and median value, k chosen.
+
+    A pruned trial's value is the last one it reported (Optuna's rule)."""
+    groups: dict[tuple, list[dict]] = {}
+    for t in trials:
+        if all(n in t["params"] for n in STRUCTURAL):
+            groups.setdefault(tuple(t["params"][n] for n in STRUCTURAL), []).append(t)
+    lines = [
+        "| " + " | ".join(STRUCTURAL) + " | trials | pruned | best (cm) | median (cm) | k chosen |",
+        "|" + "---|" * (len(STRUCTURAL) + 5),
+    ]
+    for key, ts in groups.items():
+        values = [t["value_cm"] for t in ts if t["value_cm"] is not None]
+        ks = {}
+        for t in ts:
+            ks[t["k"]] = ks.get(t["k"], 0) + 1
+        cells = [
+            str(len(ts)),
+            str(sum(t["state"] == "PRUNED" for t in ts)),
+            f"{min(values):.3f}" if values else "",
+            f"{np.median(values):.3f}" if values else "",
+            ", ".join(f"{k}: {n}" for k, n in sorted(ks.items(), key=lambda kv: str(kv[0]))),
+        ]
+        lines.append("| " + " | ".join(map(str, key)) + " | " + " | ".join(cells) + " |")
+    return [*lines, ""]
+
+
 def write_report(summ: dict, report_dir: str | Path, note: str = "") -> dict[str, Path]:
     """Writes tune.md, tune.json and tune_history.png; returns their paths."""
     out = Path(report_dir)
@@ -407,6 +435,7 @@ def write_report(summ: dict, report_dir: str | Path, note: str = "") -> dict[str
         " of trials; median pruner",
         "",
     ]
+    lines += structure_lines(summ["trials"])
     if summ["best"]:
         b = summ["best"]
         lines += [
@@ -463,6 +492,12 @@ def build_parser() -> argparse.ArgumentParser:
     )
     parser.add_argument("--note", default="", help="a paragraph put at the top of tune.md")
     parser.add_argument("--no-progress", action="store_true", help="no progress bars")
+    parser.add_argument(
+        "--report-only",
+        action="store_true",
+        help="rewrite the report of the stored study from --storage and --report-dir/tune.json"
+        " (the run's command, machine and times kept); run no trial",
+    )
     add_config_flags(parser, forward_lib.ForwardConfig, prefix="forward-")
     add_config_flags(parser, SearchSpace, prefix="space-")
     add_config_flags(parser, TrainConfig, skip=TUNED)
@@ -480,6 +515,16 @@ def main(argv=None) -> None:
 
     parser = build_parser()
     args = parser.parse_args(argv)
+    if args.report_only:
+        old = Path(args.report_dir) / "tune.json"
+        if not old.is_file() or not Path(args.storage).is_file():
+            parser.error(f"--report-only needs {old} and --storage {args.storage}")
+        extra = json.loads(old.read_text())
+        study = optuna.load_study(study_name=args.study_name, storage=storage_url(args.storage))
+        note = extra.pop("note", "")
+        paths = write_report(summary(study, extra), args.report_dir, note)
+        print("wrote", ", ".join(str(p) for p in paths.values()))
+        return
     base = config_from_args(parser, args, TrainConfig, skip=TUNED)
     fconf = config_from_args(
         parser, args, forward_lib.ForwardConfig, prefix="forward-", check=check_forward_config

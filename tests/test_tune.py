@@ -82,6 +82,12 @@ def test_tiny_study_in_batches_scores_in_the_simulator_and_resumes(small_arm_fil
     assert study.trials[3].user_attrs["batch"] == 1
     assert study.trials[3].params["gen_residual"] is structures[1]["gen_residual"] is True
     assert len(json.loads((tmp_path / "report" / "tune.json").read_text())["trials"]) == 4
+    # The report rewritten from the storage alone, with its table by structure.
+    (tmp_path / "report" / "tune.md").unlink()
+    tune.main([*argv, "--report-only"])
+    text = (tmp_path / "report" / "tune.md").read_text()
+    assert "| window_length | critic_steps | gen_residual | trials | pruned |" in text
+    assert "| 5 | 1 | False | 3 |" in text and "| 5 | 1 | True | 1 |" in text
 
 
 def test_batch_equals_one_setting_at_a_time_and_refuses_mixed_structures(small_arm_files):
