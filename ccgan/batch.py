@@ -59,6 +59,8 @@ class BatchResult(NamedTuple):
       errors_cm: [C, S, K] mean held-out X_err (cm) at every k of `hold_factors`.
       epoch: [C] the last epoch at which each setting was scored (below `epochs` if pruned).
       g_c: G_c variables of every member, stacked [C * S, ...] (setting-major).
+      history: one dict per scoring, {"epoch", "index" [C'] (the settings still live), "k"
+        [C', S], "error_cm" [C', S]}: what a stop on held-out error picks from.
     """
 
     k: np.ndarray
@@ -66,6 +68,7 @@ class BatchResult(NamedTuple):
     errors_cm: np.ndarray
     epoch: np.ndarray
     g_c: dict
+    history: tuple = ()
 
 
 class BatchTrainer:
@@ -159,6 +162,7 @@ class BatchTrainer:
         errors = np.full((n_cfg, n_seeds, n_k), np.nan)
         scored_epoch = np.zeros(n_cfg, int)
         live = np.ones(n_cfg, bool)
+        history = []
         ends = list(range(static.stretch_every, static.epochs, static.stretch_every))
         start = 0
         for end in [*ends, static.epochs]:
@@ -172,6 +176,14 @@ class BatchTrainer:
             error[index] = choice.error_cm.reshape(-1, n_seeds)
             errors[index] = choice.errors_cm.reshape(-1, n_seeds, n_k)
             scored_epoch[index] = end
+            history.append(
+                {
+                    "epoch": end,
+                    "index": index,
+                    "k": k[index].copy(),
+                    "error_cm": error[index].copy(),
+                }
+            )
             new_k = np.asarray(state.k).copy()
             new_k[members] = choice.k
             state = state.replace(k=jnp.asarray(new_k, state.k.dtype))
@@ -183,4 +195,7 @@ class BatchTrainer:
                 if not live.any():
                     break
         g_c = jax.tree.map(lambda x: np.asarray(x[:, 0]), state.params["gen"])
-        return BatchResult(k=k, error_cm=error, errors_cm=errors, epoch=scored_epoch, g_c=g_c)
+        return BatchResult(
+            k=k, error_cm=error, errors_cm=errors, epoch=scored_epoch, g_c=g_c,
+            history=tuple(history),
+        )  # fmt: skip

@@ -1,9 +1,12 @@
 """Training and evaluation of the forward dynamics models F_s and F_c.
 
-F maps (pose before the step, command) to the pose after it. It is trained teacher-forced on
-windows of babbling data (Adam with decoupled weight decay 1e-4, MSE) and evaluated on held-out
-trajectories two ways: one-step (teacher-forced on the true previous poses) and open-loop (fed its
-own predictions from the first pose), in cm and rad.
+F maps (pose before the step, command) to the pose after it. It is trained on windows of babbling
+data (Adam with decoupled weight decay 1e-4, MSE), teacher-forced as the paper trains it, or in
+open loop (`ForwardConfig.open_loop`): each window rolled out on F's own predictions from its
+first recorded pose, the way the feedback loss and the choice of k use F_c over held commands
+(`studies.forward_data` compares the two). It is evaluated on held-out trajectories two ways:
+one-step (teacher-forced on the true previous poses) and open-loop (fed its own predictions from
+the first pose), in cm and rad.
 """
 
 from __future__ import annotations
@@ -36,6 +39,9 @@ class ForwardConfig:
     hidden: int = 64
     #: Width of the tanh layer (paper: 50).
     fc: int = 50
+    #: Train on F's own predictions over each window, from its first recorded pose (the paper
+    #: trains teacher-forced, on the recorded previous poses).
+    open_loop: bool = False
 
     @property
     def model(self) -> ForwardModel:
@@ -60,7 +66,10 @@ def make_train_forward(config: ForwardConfig, split: DomainSplit, on_epoch=None)
     tx = optax.adamw(config.lr, weight_decay=config.weight_decay)
 
     def loss_fn(params, xb, pb):
-        pred = model.apply(params, pb, xb[..., :PRESSURE_DIM])
+        if config.open_loop:
+            pred = forward_open_loop(model, params, xb[..., :PRESSURE_DIM], pb[:, 0])
+        else:
+            pred = model.apply(params, pb, xb[..., :PRESSURE_DIM])
         return jnp.mean((pred - xb[..., PRESSURE_DIM:]) ** 2)
 
     def train(key):

@@ -116,6 +116,10 @@ def test_batch_equals_one_setting_at_a_time_and_refuses_mixed_structures(small_a
     configs = [base, dataclasses.replace(base, lambda_cycle=1.0, lr_generator=3e-4)]
     both = trainer.train(configs, seeds=(0, 1))
     assert both.error_cm.shape == (2, 2) and np.isfinite(both.error_cm).all()
+    # One history entry per scoring (epochs 1 and 2); the last is the final score.
+    assert [h["epoch"] for h in both.history] == [1, 2]
+    np.testing.assert_array_equal(both.history[-1]["error_cm"], both.error_cm)
+    np.testing.assert_array_equal(both.history[0]["index"], [0, 1])
     swapped = trainer.train(configs[::-1], seeds=(1, 0))
     np.testing.assert_allclose(swapped.error_cm[::-1, ::-1], both.error_cm, rtol=1e-4)
     np.testing.assert_array_equal(swapped.k[::-1, ::-1], both.k)
