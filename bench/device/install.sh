@@ -43,8 +43,10 @@ done
 
 # (2) mujoco, mujoco-mjx and their missing needs.
 if ! $PY -c "import mujoco.mjx" >/dev/null 2>&1; then
-  if compgen -G "$WHL/*.whl" >/dev/null && ! (cd "$WHL" && sha256sum -c --quiet SHA256SUMS) \
-    >/dev/null 2>&1 && (cd "$WHL" && sha256sum -c SHA256SUMS 2>&1 | grep -q "No such file"); then
+  # (The check's output is read whole: grep -q in a pipe would end sha256sum early, and under a
+  # caller's pipefail that SIGPIPE would read as "not missing".)
+  check=$(cd "$WHL" 2>/dev/null && sha256sum -c SHA256SUMS 2>&1)
+  if compgen -G "$WHL/*.whl" >/dev/null && [[ $check == *"No such file"* ]]; then
     echo "mujoco wheels staged so far: $(cd "$WHL" && ls -- *.whl | tr '\n' ' ')(not all yet)"
   elif compgen -G "$WHL/*.whl" >/dev/null; then
     (cd "$WHL" && sha256sum -c --quiet SHA256SUMS) || { echo "mujoco wheels: bad sha256"; exit 1; }
