@@ -9,7 +9,9 @@ program (`ccgan.batch.BatchTrainer`: the weights are traced numbers). A batch fi
     babbling (`--gan-data FOLDER`: its training programs, with the study folder's held-out
     programs kept as the held-out set, so every batch is scored on the same programs);
   - the F_c of the feedback loss (`--forward-c`: the study folder's, or one of
-    `studies.forward_data`, normalised with the same pose bounds).
+    `studies.forward_data`, normalised with the same pose bounds);
+  - the setting the variants start from: the paper's, or a study's best trial
+    (`--setting-from STORAGE:STUDY`, its structure and numbers; the removed loss's weight is 0).
 Every `--stretch-every` epochs each member's hold factor k is chosen on the held-out D_s
 programs in the D_c simulator (`ccgan.sim_choice`) and its error there at that k is recorded.
 The report gives, per variant, the mean and spread over seeds of the final error and of the error
@@ -96,6 +98,23 @@ def load_forward_c(path: Path, study: StudyFolder):
     return params, conf.model
 
 
+def best_setting(base: TrainConfig, spec: str, parser) -> TrainConfig:
+    """`base` with the parameters of the best trial of `STORAGE:STUDY` (`ccgan.tune`'s)."""
+    import optuna
+
+    from ccgan.tune import storage_url
+
+    storage, sep, name = spec.rpartition(":")
+    if not sep or not storage or not name:
+        parser.error(f"--setting-from {spec!r}: expected STORAGE:STUDY")
+    try:
+        best = optuna.load_study(study_name=name, storage=storage_url(storage)).best_trial
+    except (KeyError, ValueError) as err:
+        parser.error(f"--setting-from {spec}: {err}")
+    print(f"setting of trial {best.number} ({best.value:.4f} cm): {best.params}", flush=True)
+    return dataclasses.replace(base, **best.params)
+
+
 def summarise(result, seeds, stretch_only: dict) -> dict:
     """Per variant: final and best-epoch errors and k per seed, and the scoring history."""
     out = {}
@@ -178,6 +197,12 @@ def main(argv=None) -> None:
     p.add_argument("--critic-steps", type=int, default=1)
     p.add_argument("--gen-per-sample", action="store_true")
     p.add_argument("--gen-residual", action="store_true")
+    p.add_argument(
+        "--setting-from",
+        default=None,
+        metavar="STORAGE:STUDY",
+        help="start from the best trial of an Optuna study (an SQLite file or journal .log)",
+    )
     p.add_argument("--small", action="store_true", help="tiny networks (tests)")
     p.add_argument("--model", default="models/softarm.xml")
     p.add_argument("--out", required=True)
@@ -192,6 +217,8 @@ def main(argv=None) -> None:
         )  # fmt: skip
     except ValueError as err:
         p.error(str(err))
+    if a.setting_from is not None:
+        base = best_setting(base, a.setting_from, p)
     study = load_study_folder(a.study_dir, a.model)
     forward_path = Path(a.forward_c or Path(a.study_dir) / "forward" / "forward_c.ckpt")
     try:
@@ -223,6 +250,7 @@ def main(argv=None) -> None:
         "forward_c": str(forward_path),
         "seeds": a.seeds,
         "config": base.to_dict(),
+        "setting_from": a.setting_from,
         "stretch_only_cm": {str(k): v for k, v in stretch_only.items()},
         "variants": summarise(result, a.seeds, stretch_only),
     }

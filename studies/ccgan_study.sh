@@ -67,11 +67,16 @@ fi
 # No new batch after STUDY_SECONDS; a batch in flight when the call's limit nears is cut by
 # `timeout` (its trials stay RUNNING in the storage and are not counted), so the files come back.
 hard=$((${CALL_SECONDS:-560} - (SECONDS - start) - 15))
+# STUDY_NAME and FORWARD_WORKDIR start another study in the same storage with another F_c
+# (studies/issue29_gpu.sh's; its report goes to report_<name>/).
+NAME=${STUDY_NAME:-ccgan_paper_scale}
+REPORT=$RUN/report
+[[ $NAME != ccgan_paper_scale ]] && REPORT=$RUN/report_$NAME
 timeout "$hard" $PY -m ccgan.tune $DATA --model $MODEL \
-  --forward-workdir "$RUN/forward" --storage "$RUN/study.db" --study-name ccgan_paper_scale \
+  --forward-workdir "${FORWARD_WORKDIR:-$RUN/forward}" --storage "$RUN/study.db" --study-name "$NAME" \
   --n-trials 256 --trials-per-batch "${TRIALS_PER_BATCH:-16}" --timeout-s "${STUDY_SECONDS:-300}" \
   --epochs 40 --stretch-every 20 --hold-factors 10 15 20 --k-choice-seconds 20 \
-  --report-dir "$RUN/report" --no-progress
+  --report-dir "$REPORT" --no-progress
 echo "study call: $((SECONDS - start)) s"
 tar -czf "$OUT/ccgan_study.tar.gz" -C "$TMP" ccgan_study
 ls -la "$OUT"

@@ -10,7 +10,9 @@
 #      babbling on the host's cores (MuJoCo C): "scale" (400 x 60 s per domain, the paper's
 #      0.5-3 s holds) and "long" (400 x 120 s in D_c, 1-40 s holds); then the F_c runs.
 #   3. bash studies/issue29_gpu.sh ablation "LABEL" [studies.ccgan_ablation flags] [-- "LABEL2" ...]
-#      `--forward-c best` takes the F_c of the forward study with the lowest X_err at k = 15.
+#      `--forward-c best` takes the F_c of the forward study with the lowest X_err at k = 15;
+#      `--gan-data scale-data` the "scale" babbling; `--setting-from /tmp/ccgan_study/study.db:NAME`
+#      the best trial of a study that studies/ccgan_study.sh ran on this machine (optuna installed).
 set -uo pipefail
 source "$(dirname "${BASH_SOURCE[0]}")/../bench/device/install.sh" || exit 1
 [[ ${1:-} == install ]] && exit 0
@@ -18,6 +20,9 @@ echo "$(nproc) cores; $(nvidia-smi -L 2>/dev/null | head -1)"
 STUDY=studies/results/h100/ccgan_study
 MODEL=models/softarm.xml
 RUN=$TMP/issue29
+# A fresh machine starts from the committed results (the forward study's F_c, the ablation so far).
+COMMITTED=studies/results/h200/issue29
+[[ -d $RUN || ! -d $COMMITTED ]] || cp -a "$COMMITTED" "$RUN"
 mkdir -p "$RUN"
 start=$SECONDS
 pack() {
