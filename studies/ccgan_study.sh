@@ -49,7 +49,8 @@ echo "$(nproc) cores; $(nvidia-smi -L 2>/dev/null | head -1)"
 STUDY=${STUDY_DIR:-studies/results/h100/ccgan_study}
 RUN=$TMP/ccgan_study
 mkdir -p "$RUN"
-[[ -d $STUDY ]] && cp -a "$STUDY"/. "$RUN"/
+# (Only into a fresh machine's folder: a warm one's storage holds trials of its earlier calls.)
+[[ -d $STUDY && ! -f $RUN/study.db ]] && cp -a "$STUDY"/. "$RUN"/
 MODEL=models/softarm.xml
 DATA="--source $RUN/babble/source_train.npz $RUN/babble/source_val.npz
       --constrained $RUN/babble/constrained_train.npz $RUN/babble/constrained_val.npz"
