@@ -29,6 +29,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ccgan import checkpoint
+from ccgan import data as data_lib
 from ccgan.cli import (
     add_config_flags,
     add_data_flags,
@@ -387,8 +388,58 @@ def load_npz(*paths: str | os.PathLike):
     return d.pressures_bar, d.poses, d.bounds
 
 
+def forward_splits(
+    data: TranslationData, d_s, d_c, config: TrainConfig, window: int, forward_c=None
+) -> dict:
+    """The windows F_s and F_c train on: {"forward_s": DomainSplit, "forward_c": DomainSplit}.
+
+    By default both are the CCGAN's own windows (`data`). `window` (control steps) re-cuts the
+    programs (`d_s`, `d_c`: `ccgan.data.DomainData`) to another length: open-loop training
+    (`ForwardConfig.open_loop`) wants windows as long as the horizon F_c predicts in the feedback
+    loss (window_length x k). `forward_c`, D_c babbling of the same arm (a `DomainData`, e.g.
+    with holds long enough for the slow D_c arm to settle:
+    `studies/results/h200/issue29/forward_data/forward_data.md`), replaces D_c's training
+    programs for F_c. Either way F_c is evaluated on the CCGAN's held-out D_c programs, and
+    every window is normalised with the CCGAN's pose bounds.
+    """
+    if window == config.window_length and forward_c is None:
+        return {"forward_s": data.source, "forward_c": data.constrained}
+
+    def cut(d, n_val, name):
+        return data_lib.split_domain(
+            d.pressures_bar, d.poses, data.bounds, window, n_val, name=name
+        )
+
+    train_c = cut(d_c, config.n_val, "D_c") if forward_c is None else cut(forward_c, 0, "F_c data")
+    return {
+        "forward_s": cut(d_s, config.n_val, "D_s"),
+        "forward_c": data.constrained._replace(
+            train=train_c.train, train_prev_pose=train_c.train_prev_pose
+        ),
+    }
+
+
+def forward_meta(fconf: ForwardConfig, data: TranslationData, splits: dict | None = None) -> dict:
+    """The metadata that ties F_s and F_c to their settings and data (checked on resume and by
+    --forward-from). Windows other than the CCGAN's own (`forward_splits`) add their hash."""
+    meta = {"config": dataclasses.asdict(fconf), "data": data_fingerprint(data)}
+    if splits is not None and (
+        splits["forward_s"] is not data.source or splits["forward_c"] is not data.constrained
+    ):
+        meta["forward_windows"] = checkpoint.fingerprint(
+            *(a for split in splits.values() for a in (split.train, split.train_prev_pose))
+        )
+    return meta
+
+
 def train_forward_models(
-    fconf: ForwardConfig, data: TranslationData, workdir: Path, progress=True, resume=False
+    fconf: ForwardConfig,
+    data: TranslationData,
+    workdir: Path,
+    progress=True,
+    resume=False,
+    splits: dict | None = None,
+    f_meta: dict | None = None,
 ):
     """Trains F_s and F_c, writes `forward_{s,c}.ckpt` and `forward_metrics.json` to workdir.
 
@@ -403,14 +454,11 @@ def train_forward_models(
 
     from ccgan import forward as forward_lib
 
-    f_meta = {"config": dataclasses.asdict(fconf), "data": data_fingerprint(data)}
+    splits = splits or {"forward_s": data.source, "forward_c": data.constrained}
+    f_meta = f_meta or forward_meta(fconf, data, splits)
     metrics_path = workdir / "forward_metrics.json"
     report = _finished_forward_models(workdir, metrics_path, f_meta) if resume else {}
-    models = [
-        (name, split)
-        for name, split in (("forward_s", data.source), ("forward_c", data.constrained))
-        if name not in report
-    ]
+    models = [(name, split) for name, split in splits.items() if name not in report]
     bar = tqdm(
         total=len(models) * fconf.epochs, desc="forward models", unit="epoch", disable=not progress
     )
@@ -438,9 +486,11 @@ def _finished_forward_models(workdir: Path, metrics_path: Path, f_meta: dict) ->
     done = {}
     for name in ("forward_s", "forward_c"):
         try:
-            checkpoint.load(workdir / f"{name}.ckpt", expect=f_meta)
+            _, stored_meta = checkpoint.load(workdir / f"{name}.ckpt", expect=f_meta)
         except checkpoint.CheckpointError:  # absent, corrupt or made otherwise: trained again
             continue
+        if stored_meta.get("forward_windows") != f_meta.get("forward_windows"):
+            continue  # trained on other windows
         if isinstance(stored, dict) and name in stored:
             done[name] = stored[name]
     return done
@@ -457,9 +507,14 @@ def copy_forward_models(parser, source: Path, workdir: Path, f_meta: dict) -> No
         parser.error(f"--forward-from {source}: no {', '.join(missing)} there")
     for name in ("forward_s.ckpt", "forward_c.ckpt"):
         try:
-            checkpoint.load(source / name, expect=f_meta)
+            _, stored = checkpoint.load(source / name, expect=f_meta)
         except checkpoint.CheckpointError as err:
             parser.error(f"--forward-from: {err}")
+        if stored.get("forward_windows") != f_meta.get("forward_windows"):
+            parser.error(
+                f"--forward-from: {source / name} was trained on other windows (forward_windows"
+                " differ): pass the --forward-data and --forward-window it was trained with"
+            )
     for name in FORWARD_FILES:
         shutil.copy2(source / name, workdir / name)
 
@@ -478,6 +533,35 @@ def simulator_choice_from_args(parser, args, config: TrainConfig, data: Translat
         )
     label = None if args.no_progress else "k in the simulator"
     return SimulatorChoice(arm, data, config, progress=label)
+
+
+def forward_splits_from_args(parser, args, config: TrainConfig, data, d_s, d_c) -> dict:
+    """`forward_splits` of --forward-window and --forward-data (usage errors for bad ones)."""
+    from mjx_arm.dataset import DatasetError
+
+    window = args.forward_window or config.window_length
+    if window < 1:
+        parser.error(f"--forward-window must be at least 1, got {window}")
+    forward_c = None
+    if args.forward_data:
+        try:
+            forward_c = read_domain(args.forward_data, "constrained", d_c.model_hash)
+        except DatasetError as err:
+            parser.error(f"--forward-data: {err}")
+        if forward_c.domain != d_c.domain:
+            parser.error(
+                f"--forward-data holds domain {forward_c.domain!r}, --constrained {d_c.domain!r}"
+            )
+    shortest = min(d.pressures_bar.shape[1] for d in (d_s, forward_c or d_c))
+    if window > shortest:
+        parser.error(
+            f"--forward-window {window} is longer than the programs F_s / F_c train on"
+            f" ({shortest} steps)"
+        )
+    try:
+        return forward_splits(data, d_s, d_c, config, window, forward_c)
+    except ValueError as err:
+        parser.error(f"--forward-window / --forward-data: {err}")
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -507,6 +591,21 @@ def build_parser() -> argparse.ArgumentParser:
         default=None,
         help="take F_s and F_c from DIR (a --forward-only workdir) instead of training them;"
         " they must have been trained on the same data with the same --forward-* options",
+    )
+    parser.add_argument(
+        "--forward-data",
+        nargs="+",
+        default=None,
+        metavar="NPZ",
+        help="D_c babbling files that F_c trains on instead of --constrained's training programs"
+        " (the same arm and domain; e.g. holds long enough for the slow arm to settle)",
+    )
+    parser.add_argument(
+        "--forward-window",
+        type=int,
+        default=0,
+        help="control steps per F_s / F_c training window (0: --window-length); with"
+        " --forward-open-loop, about the feedback horizon window_length x k",
     )
     add_config_flags(parser, ForwardConfig, prefix="forward-")
     add_config_flags(parser, TrainConfig, choices={"feedback_impl": FEEDBACK_IMPLS})
@@ -561,14 +660,16 @@ def main(argv=None) -> None:
     enable_compilation_cache()
     workdir = Path(args.workdir)
     workdir.mkdir(parents=True, exist_ok=True)
-    f_meta = {"config": dataclasses.asdict(fconf), "data": data_fingerprint(data)}
+    splits = forward_splits_from_args(parser, args, config, data, d_s, d_c)
+    f_meta = forward_meta(fconf, data, splits)
     fc_path = workdir / "forward_c.ckpt"
     if args.forward_from is not None:
         copy_forward_models(parser, Path(args.forward_from), workdir, f_meta)
     elif args.no_resume or not all((workdir / name).exists() for name in FORWARD_FILES):
         train_forward_models(
-            fconf, data, workdir, progress=not args.no_progress, resume=not args.no_resume
-        )
+            fconf, data, workdir, progress=not args.no_progress, resume=not args.no_resume,
+            splits=splits, f_meta=f_meta,
+        )  # fmt: skip
     fc_params, _ = checkpoint.load(fc_path, expect=f_meta)
     if args.forward_only:
         return

@@ -52,8 +52,11 @@ if ((n_gpus > 1)); then
   devices=(--devices $(seq 0 $((n_gpus - 1))))
   JOBS=${JOBS:-$((n_gpus > 4 ? n_gpus : 4))}
 fi
+# STAGES="a b ..." runs only those stages (their inputs must be done or among them).
+only=()
+[[ -n ${STAGES:-} ]] && only=(--stage $STAGES)
 $PY -m experiments.paper --out "$RUN_DIR" --config "$CONFIG" --jobs "${JOBS:-4}" "${devices[@]}" \
-  --deadline-s "${DEADLINE_S:-500}" 2>&1 |
+  "${only[@]}" --deadline-s "${DEADLINE_S:-500}" 2>&1 |
   tee -a "$TMP/paper_log.txt"
 rc=${PIPESTATUS[0]}
 kill $sampler 2>/dev/null

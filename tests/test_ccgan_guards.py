@@ -514,6 +514,46 @@ def test_forward_models_trained_once_serve_other_runs_only_when_they_fit(
     assert {k: meta[k] for k in translator_lib.LABELS} == labelled("ccgan", "constrained", h)
 
 
+def test_f_c_on_its_own_data_and_windows_serves_only_runs_that_ask_for_them(
+    tmp_path, files, small_arm, capsys
+):
+    """--forward-data / --forward-window / --forward-open-loop: F_c trains on other programs in
+    longer windows, on its own predictions; a run that reuses it must name the same ones."""
+    model, h = small_arm
+    long_c = write_dataset(tmp_path / "long.npz", "constrained", h, n=3, steps=40, seed=7)
+    data = ["--source", files["s"], "--constrained", files["c"], "--model", model, *TINY_TRAIN]
+    own = ["--forward-data", str(long_c), "--forward-window", "20", "--forward-open-loop"]
+    forward_dir = tmp_path / "forward"
+    train_lib.main([*data, *own, "--workdir", str(forward_dir), "--forward-only"])
+    _, meta = checkpoint.load(forward_dir / "forward_c.ckpt")
+    assert meta["config"]["open_loop"] is True and "forward_windows" in meta
+    metrics = json.loads((forward_dir / "forward_metrics.json").read_text())
+    assert np.isfinite(metrics["forward_c"]["open_loop_cm"])  # on --constrained's held-out file
+    # Without the same F_c data, the models do not fit this run: refused before training.
+    err = usage_error(
+        train_lib.main,
+        [*data, "--forward-open-loop", "--workdir", str(tmp_path / "r1"),
+         "--forward-from", str(forward_dir)],
+        capsys,
+    )  # fmt: skip
+    assert "--forward-from" in err and "forward_windows" in err
+    r2 = tmp_path / "r2"
+    train_lib.main([*data, *own, "--workdir", str(r2), "--forward-from", str(forward_dir)])
+    assert (r2 / "forward_c.ckpt").read_bytes() == (forward_dir / "forward_c.ckpt").read_bytes()
+    # F_c data of another domain, or windows longer than the programs: usage errors.
+    aged = write_dataset(tmp_path / "aged.npz", "aged", h, seed=8)
+    err = usage_error(
+        train_lib.main, [*data, "--forward-data", str(aged), "--workdir", str(tmp_path / "r3")],
+        capsys,
+    )  # fmt: skip
+    assert "--forward-data" in err and "aged" in err
+    err = usage_error(
+        train_lib.main, [*data, "--forward-window", "999", "--workdir", str(tmp_path / "r4")],
+        capsys,
+    )  # fmt: skip
+    assert "--forward-window" in err
+
+
 def test_sigterm_stops_training_after_its_epoch_with_a_checkpoint(
     tmp_path, files, small_arm, monkeypatch
 ):
