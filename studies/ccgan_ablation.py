@@ -220,6 +220,7 @@ def main(argv=None) -> None:
     if a.setting_from is not None:
         base = best_setting(base, a.setting_from, p)
     study = load_study_folder(a.study_dir, a.model)
+    base = dataclasses.replace(base, n_val=study.n_val)  # the study folder's held-out programs
     forward_path = Path(a.forward_c or Path(a.study_dir) / "forward" / "forward_c.ckpt")
     try:
         data = gan_data(study, a.gan_data, base.window_length)
