@@ -538,7 +538,9 @@ def test_f_c_on_its_own_data_and_windows_serves_only_runs_that_ask_for_them(
     )  # fmt: skip
     assert "--forward-from" in err and "forward_windows" in err
     r2 = tmp_path / "r2"
-    train_lib.main([*data, *own, "--workdir", str(r2), "--forward-from", str(forward_dir)])
+    train_lib.main(
+        [*data, *own, "--workdir", str(r2), "--forward-from", str(forward_dir), "--forward-only"]
+    )
     assert (r2 / "forward_c.ckpt").read_bytes() == (forward_dir / "forward_c.ckpt").read_bytes()
     # F_c data of another domain, or windows longer than the programs: usage errors.
     aged = write_dataset(tmp_path / "aged.npz", "aged", h, seed=8)

@@ -52,18 +52,18 @@ def test_forward_data_and_the_ablation_run_end_to_end(study_folder, tmp_path, ca
     folder, model = study_folder
     out = tmp_path / "fdata"
     argv = ["--study-dir", str(folder), "--model", str(model), "--runs", "paper:2:teacher:5",
-            "paper:2:open:10", "paper:3:open:10", "--steps", "3", "--batch-size", "2",
+            "paper:3:teacher:5", "paper:3:open:10", "--steps", "3", "--batch-size", "2",
             "--hold-factors", "1", "2", "--out", str(out)]  # fmt: skip
     forward_data.main(argv)
     report = json.loads((out / "forward_data.json").read_text())
     assert [r["name"] for r in report["runs"]] == [
-        "paper_n2_teacher5", "paper_n2_open10", "paper_n3_open10"
+        "paper_n2_teacher5", "paper_n3_teacher5", "paper_n3_open10"
     ]  # fmt: skip
     for r in report["runs"]:
         assert [s["k"] for s in r["scores"]] == [1, 2]
         assert all(np.isfinite(s["kept_cm"]) and s["max_cm"] >= s["kept_cm"] for s in r["scores"])
         assert r["epochs"] * (r["windows"] // 2) >= 3  # the steps asked, at least
-    _, meta = checkpoint.load(out / "paper_n2_open10" / "forward_c.ckpt")
+    _, meta = checkpoint.load(out / "paper_n3_open10" / "forward_c.ckpt")
     assert meta["config"]["open_loop"] is True and "low" in meta["bounds"]
     assert (out / "forward_data.png").stat().st_size > 0  # two N of one family: a plot
     # A rerun with the same --out keeps what is there and trains nothing again.
@@ -74,8 +74,8 @@ def test_forward_data_and_the_ablation_run_end_to_end(study_folder, tmp_path, ca
     abl = tmp_path / "ablation"
     flags = ["--study-dir", str(folder), "--model", str(model), "--small", "--epochs", "2",
              "--stretch-every", "1", "--hold-factors", "1", "2", "--k-choice-seconds", "1",
-             "--seeds", "0", "1", "--window-length", "5", "--out", str(abl)]  # fmt: skip
-    fc = out / "paper_n2_open10" / "forward_c.ckpt"
+             "--seeds", "0", "--window-length", "5", "--out", str(abl)]  # fmt: skip
+    fc = out / "paper_n3_open10" / "forward_c.ckpt"
     ccgan_ablation.main([*flags, "--label", "tiny", "--forward-c", str(fc)])
     batch = json.loads((abl / "ablation.json").read_text())["batches"]["tiny"]
     assert list(batch["variants"]) == list(ccgan_ablation.VARIANTS)
