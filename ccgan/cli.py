@@ -109,7 +109,9 @@ def add_config_flags(
             "help": docs.get(f.name, "").replace("%", "%%") or f.name.replace("_", " "),
         }
         if f.type in ("bool", bool):
-            group.add_argument(flag, action="store_true", **kw)
+            # A switch; one that is on by default also gets --no-<name> to turn it off.
+            action = argparse.BooleanOptionalAction if f.default is True else "store_true"
+            group.add_argument(flag, action=action, **kw)
         elif "tuple" in str(f.type):
             typ = {"float": float, "bool": _boolean}.get(str(f.type)[6:-1].split(",")[0], int)
             # tuple[float, float] takes exactly two values; tuple[int, ...] one or more.

@@ -73,6 +73,11 @@ class TrainConfig:
     #: target-domain arm, as the authors' code does (`ccgan.sim_choice`); "forward" runs them
     #: through the learned F_c inside the jitted epoch (fast, but F_c's open-loop drift enters).
     k_choice: str = "simulator"
+    #: With k_choice "simulator": write each seed's G_c (and its k) from the scored epoch with
+    #: the lowest held-out error, not the last epoch's (a stop on held-out error; untrained G_c
+    #: never counts). Training oscillates: the best scored epochs were 20-40 of 80
+    #: (docs/ccgan_study.md).
+    keep_best: bool = True
     #: Seconds of each held-out program simulated when k_choice is "simulator" (0 = whole
     #: programs; the authors' code uses one 30 s program).
     k_choice_seconds: float = 20.0

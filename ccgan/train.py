@@ -193,8 +193,12 @@ def train_and_evaluate(
         choice_rows = [r for r in _read_rows(choices_path) if r["epoch"] <= int(state.epoch[0])]
     done = int(np.asarray(state.epoch)[0])
     after_epoch = None
+    best = None
     if k_choice is not None and config.k_choice == "simulator":
-        after_epoch = _simulator_choice(k_choice, config, seeds, choice_rows, choices_path)
+        best = BestGenerators(workdir / "best_gen.ckpt", meta, len(seeds), resuming)
+        after_epoch = _simulator_choice(
+            k_choice, config, seeds, choice_rows, choices_path, best if config.keep_best else None
+        )
         if not resuming:  # like the authors' code: once before training, untrained G_c
             state, _ = after_epoch(0, state, None)
     bar = tqdm(total=config.epochs, initial=done, unit="epoch", disable=not progress, desc="ccgan")
@@ -206,7 +210,7 @@ def train_and_evaluate(
     if int(np.asarray(state.epoch)[0]) >= config.epochs:
         _save_translators(
             workdir,
-            state,
+            best.applied(state) if best is not None and config.keep_best else state,
             seeds,
             data,
             config,
@@ -218,12 +222,83 @@ def train_and_evaluate(
     return state, rows
 
 
-def _simulator_choice(k_choice, config: TrainConfig, seeds, rows: list[dict], path: Path):
+class BestGenerators:
+    """Each seed's generators at its scored epoch with the lowest held-out error, kept in
+    `path` (rewritten at each improvement, so a resumed run keeps them).
+
+    Args:
+      path: the checkpoint file (`best_gen.ckpt` in the workdir).
+      meta: the run's metadata (config, data, seeds): a stored file of another run is ignored.
+      n_seeds: S.
+      resume: read `path` if it belongs to this run.
+    """
+
+    def __init__(self, path: Path, meta: dict, n_seeds: int, resume: bool):
+        self.path, self.meta = path, meta
+        self.error = np.full(n_seeds, np.inf)
+        self.epoch = np.zeros(n_seeds, int)
+        self.k = np.zeros(n_seeds, int)
+        self.gen = None  # [S, ...] generators' variables (numpy), once any seed was scored
+        if resume and path.exists():
+            try:
+                self.gen, stored = checkpoint.load(path, expect=meta)
+            except checkpoint.CheckpointError:
+                return
+            self.error = np.asarray(stored["best_error_cm"], float)
+            self.epoch = np.asarray(stored["best_epoch"], int)
+            self.k = np.asarray(stored["best_k"], int)
+
+    def update(self, epochs_done: int, gen, k: np.ndarray, error: np.ndarray) -> None:
+        """Keeps the seeds whose `error` [S] (cm) at `epochs_done` beats their best so far."""
+        better = np.asarray(error) < self.error
+        if epochs_done == 0 or not better.any():
+            return
+        now = jax.tree.map(np.asarray, gen)
+        if self.gen is None:
+            self.gen = now
+        else:
+            self.gen = jax.tree.map(
+                lambda b, n: np.where(better.reshape((-1,) + (1,) * (n.ndim - 1)), n, b),
+                self.gen,
+                now,
+            )
+        self.error = np.where(better, error, self.error)
+        self.epoch = np.where(better, epochs_done, self.epoch)
+        self.k = np.where(better, k, self.k)
+        checkpoint.save(
+            self.path,
+            self.gen,
+            self.meta
+            | {
+                "best_error_cm": self.error.tolist(),
+                "best_epoch": self.epoch.tolist(),
+                "best_k": self.k.tolist(),
+            },
+        )
+
+    def applied(self, state):
+        """`state` with each scored seed's best generators and k (others as they are)."""
+        if self.gen is None:
+            return state
+        scored = self.epoch > 0
+        gen = jax.tree.map(
+            lambda b, n: np.where(scored.reshape((-1,) + (1,) * (n.ndim - 1)), b, np.asarray(n)),
+            self.gen,
+            state.params["gen"],
+        )
+        k = np.where(scored, self.k, np.asarray(state.k))
+        return state.replace(params={**state.params, "gen": gen}, k=jnp.asarray(k, state.k.dtype))
+
+
+def _simulator_choice(
+    k_choice, config: TrainConfig, seeds, rows: list[dict], path: Path, best=None
+):
     """`after_epoch(epochs_done, state, metrics) -> (state, metrics)` for `_run_chunks`.
 
     After the epochs where k is due (every `stretch_every` and the last; 0 = before training),
     chooses each seed's k in the simulator, sets it in the state and in that epoch's metrics
-    (k, val_error_cm), and appends one row per seed to `rows`, rewritten to `path`.
+    (k, val_error_cm), and appends one row per seed to `rows`, rewritten to `path`. With `best`
+    (a `BestGenerators`), each seed's generators at its lowest error are kept there.
     """
 
     def after_epoch(epochs_done: int, state, metrics):
@@ -239,6 +314,8 @@ def _simulator_choice(k_choice, config: TrainConfig, seeds, rows: list[dict], pa
                 row[f"error_cm_k{k}"] = float(err)
             rows.append(row)
         _write_rows(path, rows)
+        if best is not None:
+            best.update(epochs_done, state.params["gen"], choice.k, choice.error_cm)
         if metrics is not None:
             metrics = dict(metrics)
             metrics["k"] = metrics["k"].at[:, -1].set(jnp.asarray(choice.k, jnp.float32))

@@ -435,15 +435,24 @@ def test_k_chosen_in_the_target_arm_like_the_authors_and_resumed_exactly(tiny_se
     # Before training, after epoch 3 (stretch_every) and after the last (4), for both seeds.
     assert [(r["epoch"], r["seed"]) for r in choices] == [(e, s) for e in (0, 3, 4) for s in (0, 1)]
     last = {r["seed"]: r for r in choices if r["epoch"] == 4}
+    _, best_meta = checkpoint.load(tmp_path / "full" / "best_gen.ckpt")
     for s_i, seed in enumerate((0, 1)):
         errors = [last[seed][f"error_cm_k{k}"] for k in config.hold_factors]
         assert int(full.k[s_i]) == config.hold_factors[int(np.argmin(errors))]
         row = next(r for r in rows if r["seed"] == seed and r["epoch"] == 4)
         assert row["val_error_cm"] == pytest.approx(min(errors), rel=1e-6)
+        # keep_best: the translator is the seed's trained G_c at its scored epoch (3 or 4) with
+        # the lowest held-out error, with that epoch's k; the untrained one (epoch 0) never counts.
+        scored = [r for r in choices if r["seed"] == seed and r["epoch"] > 0]
+        best = min(scored, key=lambda r: r[f"error_cm_k{int(r['k'])}"])
+        assert best_meta["best_epoch"][s_i] == best["epoch"]
         tr = ccgan.load_translator(
             tmp_path / "full" / f"translator_seed{seed}.ckpt", trust_unlabelled=True
         )
-        assert tr.k == int(full.k[s_i])
+        assert tr.k == int(best["k"])
+        final_g_c = train_lib.generator(jax.tree.map(lambda x, i=s_i: x[i], full.params), 0)
+        if best["epoch"] == 4:
+            assert _params_equal(tr.g_c_params, final_g_c)
 
         # The error at each k, by hand: seed's G_c on the first 2 s of the held-out program,
         # held k periods, from rest in the D_c arm, every k-th pose against the D_s poses.
@@ -466,6 +475,22 @@ def test_k_chosen_in_the_target_arm_like_the_authors_and_resumed_exactly(tiny_se
     assert _params_equal(resumed.params, full.params)
     assert np.array_equal(resumed.k, full.k)
     assert train_lib._read_rows(tmp_path / "cut" / "k_choices.csv") == choices
+    for seed in (0, 1):
+        a, b = (
+            ccgan.load_translator(
+                tmp_path / run / f"translator_seed{seed}.ckpt", trust_unlabelled=True
+            )
+            for run in ("full", "cut")
+        )
+        assert a.k == b.k and _params_equal(a.g_c_params, b.g_c_params)
+    # keep_best off: the last epoch's G_c and k, as before.
+    last_only = dataclasses.replace(config, keep_best=False)
+    final, _ = train_lib.train_and_evaluate(last_only, data, fparams, tmp_path / "last", **kw)
+    tr = ccgan.load_translator(tmp_path / "last" / "translator_seed1.ckpt", trust_unlabelled=True)
+    assert tr.k == int(final.k[1])
+    assert _params_equal(
+        tr.g_c_params, train_lib.generator(jax.tree.map(lambda x: x[1], final.params), 0)
+    )
 
 
 def test_retired_feedback_rollouts_are_refused_by_name():
