@@ -63,8 +63,9 @@ ARM_NOTE = (
 )
 #: What the report says of the arm at constants.DEFAULT_MODEL_PATH.
 DEFAULT_ARM_NOTE = (
-    "the I-Support arm under the paper's Cosserat law (the default model); the committed"
-    " translators were trained on models/softarm_linear.xml, not on it"
+    "the I-Support arm under the paper's Cosserat law (the default model); the translators"
+    " committed in results/paper/run/ were trained on models/softarm_linear.xml, not on it"
+    " (translators given here were checked to be of this arm)"
 )
 #: What the report says of the arm at constants.SOLID_MODEL_PATH.
 SOLID_ARM_NOTE = (
