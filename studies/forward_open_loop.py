@@ -34,8 +34,8 @@ from ccgan import checkpoint
 from ccgan import data as data_lib
 from ccgan.forward import ForwardConfig
 from ccgan.models import forward_open_loop
-from mjx_arm.dataset import load_dataset
 from mjx_arm.machine import cpu_model
+from studies.study_folder import load_study_folder
 from tracking import held, metrics
 
 
@@ -66,19 +66,15 @@ def main(argv=None) -> None:
     p.add_argument("--model", default="models/softarm.xml")
     p.add_argument("--out", required=True)
     a = p.parse_args(argv)
-    folder = Path(a.study_dir)
-    arm_s = mjx_arm.load(a.model, domain="source")
-    arm_c = mjx_arm.load(a.model, domain="constrained")
-    babble = folder / "babble"
-    d_s, d_c = data_lib.read_translation_files(
-        [babble / f"source_{s}.npz" for s in ("train", "val")],
-        [babble / f"constrained_{s}.npz" for s in ("train", "val")],
-        arm_c.model_hash,
+    study = load_study_folder(a.study_dir, a.model)
+    folder, arm_s, arm_c, bounds, n_val = (
+        study.folder,
+        study.arm_s,
+        study.arm_c,
+        study.bounds,
+        study.n_val,
     )
-    bounds = data_lib.union_bounds(d_s.bounds, d_c.bounds)
-    n_val = len(load_dataset(babble / "source_val.npz").pressures_bar)
-    programs = np.asarray(d_s.pressures_bar[-n_val:], np.float64)  # the held-out D_s programs
-    target_s = np.asarray(d_s.poses[-n_val:], np.float64)
+    programs, target_s = study.heldout_programs_bar, study.heldout_poses_s
     params = {}
     for name in ("forward_s", "forward_c"):
         params[name], meta = checkpoint.load(folder / "forward" / f"{name}.ckpt")
