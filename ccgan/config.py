@@ -16,6 +16,8 @@ if TYPE_CHECKING:
 
 #: Where `TrainConfig.k_choice` scores the hold factors.
 K_CHOICES = ("simulator", "forward")
+#: The held-out programs `TrainConfig.k_choice_programs` can name.
+K_CHOICE_PROGRAMS = ("babbling", "shape_like")
 #: The feedback rollouts `TrainConfig.feedback_impl` can name.
 FEEDBACK_IMPLS = ("auto", "lean", "lean_reduce")
 #: Rollouts that were options once and lost (docs/benchmarks.md, "Retired experiments"). A
@@ -81,6 +83,16 @@ class TrainConfig:
     #: Seconds of each held-out program simulated when k_choice is "simulator" (0 = whole
     #: programs; the authors' code uses one 30 s program).
     k_choice_seconds: float = 20.0
+    #: The held-out D_s programs k is chosen (and keep_best scores) on with k_choice
+    #: "simulator": "babbling" (the training data's held-out babbling, `n_val` of them) or
+    #: "shape_like" (`k_choice_n_programs` programs of the shapes' signal types,
+    #: `mjx_arm.programs.shape_like_programs` split "k_choice", full scale, never a test shape;
+    #: their D_s targets simulated from rest). Babbling at these holds does not stand for the
+    #: shapes: a translator can beat stretch only there and lose on the shapes
+    #: (docs/ccgan_study.md).
+    k_choice_programs: str = "babbling"
+    #: Shape-like programs drawn when k_choice_programs is "shape_like".
+    k_choice_n_programs: int = 12
     #: Control steps per held-out window when k_choice is "forward" (0 = whole trajectories).
     #: Each window starts F_c from the recorded pose, so the windows run in parallel: the
     #: choice costs val_window_length * k_max sequential F_c periods instead of T_val * k_max.
@@ -144,6 +156,7 @@ class TrainConfig:
                 "stretch_every": 1,
                 "val_window_length": 0,
                 "k_choice_seconds": 0,
+                "k_choice_n_programs": 1,
                 "gen_unroll": 1,
                 "feedback_unroll": 1,
                 "checkpoint_every": 1,
@@ -156,6 +169,15 @@ class TrainConfig:
         )
         if self.k_choice not in K_CHOICES:
             raise ConfigError("k_choice", f"must be one of {K_CHOICES}, got {self.k_choice!r}")
+        if self.k_choice_programs not in K_CHOICE_PROGRAMS:
+            raise ConfigError(
+                "k_choice_programs",
+                f"must be one of {K_CHOICE_PROGRAMS}, got {self.k_choice_programs!r}",
+            )
+        if self.k_choice_programs == "shape_like" and not self.k_choice_seconds:
+            raise ConfigError(
+                "k_choice_seconds", "must be > 0 with k_choice_programs shape_like (their length)"
+            )
         if self.feedback_impl not in FEEDBACK_IMPLS:
             retired = (
                 ", a retired rollout (docs/benchmarks.md)"

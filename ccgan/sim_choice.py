@@ -4,9 +4,10 @@ The authors pick k by running G_c's commands in their D_c simulator, each held k
 and comparing every k-th pose with the D_s target (`scripts/train_test_utils.py`;
 `shared/notes/paper-facts.md`). Choosing k through the learned F_c instead measures F_c's open-loop
 drift as much as the translator (3.7 cm on held-out D_c babbling for the paper-scale F_c), so the
-trainer's default (`TrainConfig.k_choice = "simulator"`) is this module: held-out D_s programs of
-the training data, translated by each seed's G_c and rolled out from rest in the true target-domain
-arm at every k of `TrainConfig.hold_factors`.
+trainer's default (`TrainConfig.k_choice = "simulator"`) is this module: held-out D_s programs (the
+training data's held-out babbling, or shape-like programs with `TrainConfig.k_choice_programs`),
+translated by each seed's G_c and rolled out from rest in the true target-domain arm at every k
+of `TrainConfig.hold_factors`.
 
 It runs on the host between epochs (`ccgan.train.train_and_evaluate`): before training, every
 `stretch_every` epochs and after the last. The rollouts are MuJoCo C on the host's cores by
@@ -22,9 +23,16 @@ import jax.numpy as jnp
 import numpy as np
 
 from ccgan.config import TrainConfig
-from ccgan.data import PRESSURE_DIM, TranslationData, denormalise_pose, denormalise_pressure
+from ccgan.data import (
+    PRESSURE_DIM,
+    TranslationData,
+    denormalise_pose,
+    denormalise_pressure,
+    samples,
+)
 from ccgan.models import Generator
 from mjx_arm.constants import CONTROL_HZ
+from mjx_arm.programs import shape_like_programs
 from tracking import held, metrics
 
 
@@ -42,18 +50,57 @@ class Choice(NamedTuple):
     errors_cm: np.ndarray
 
 
+#: The split of `mjx_arm.programs.shape_like_programs` the shape-like held-out programs come
+#: from (disjoint from the fine-tuning, distillation and study splits; never a test shape).
+SHAPE_LIKE_SPLIT = "k_choice"
+
+
+def describe_programs(config: dict) -> str:
+    """What the held-out programs of a stored `TrainConfig` dict are, for reports."""
+    if config.get("k_choice_programs", "babbling") == "shape_like":
+        return (
+            f"{config['k_choice_n_programs']} held-out shape-like D_s programs of"
+            f" {config['k_choice_seconds']:g} s (`shape_like_programs` split {SHAPE_LIKE_SPLIT},"
+            " full scale, never a test shape)"
+        )
+    seconds = config["k_choice_seconds"]
+    part = f"first {seconds:g} s" if seconds else "whole length"
+    return f"the {config['n_val']} held-out babbling D_s programs' {part}"
+
+
+def shape_like_samples(source_arm, data: TranslationData, config: TrainConfig) -> np.ndarray:
+    """Held-out shape-like D_s programs as normalised samples [N, T, 9].
+
+    `config.k_choice_n_programs` programs of `config.k_choice_seconds` (split `SHAPE_LIKE_SPLIT`,
+    seed 0, full scale as the shapes are), each run from rest in the source-domain arm (MuJoCo
+    C); their poses are the targets, normalised with the training data's pose bounds.
+    """
+    programs = shape_like_programs(
+        config.k_choice_n_programs,
+        config.k_choice_seconds,
+        seed=0,
+        split=SHAPE_LIKE_SPLIT,
+        full_scale=True,
+    )
+    poses = source_arm.rollout(programs.astype(np.float64), backend="c")
+    return samples(programs, poses, data.bounds)
+
+
 class SimulatorChoice:
     """Scores G_c on held-out D_s programs in the target-domain simulator, at every hold factor.
 
     Args:
       arm: the target-domain arm (`mjx_arm.load(..., domain="constrained")` or "aged"), the one
         the training data's target domain was simulated on.
-      data: the prepared training data; its held-out D_s trajectories (`data.source.val`, the
-        babbling programs `TrainConfig.n_val` kept out of training, each run from rest) are
-        translated and their recorded D_s poses are the targets.
+      data: the prepared training data. With `TrainConfig.k_choice_programs` "babbling" its
+        held-out D_s trajectories (`data.source.val`, the babbling programs `TrainConfig.n_val`
+        kept out of training, each run from rest) are translated and their recorded D_s poses
+        are the targets; with "shape_like", `shape_like_samples` (its pose bounds normalise).
       config: the run's settings (generator widths, `hold_factors`, `k_choice_seconds`).
       backend: "c" (MuJoCo C, one thread per trajectory) or "mjx".
       progress: label of a progress bar over the rollouts, or None for none.
+      source_arm: the source-domain arm, needed with k_choice_programs "shape_like" (it
+        simulates the programs' targets).
     """
 
     def __init__(
@@ -63,8 +110,17 @@ class SimulatorChoice:
         config: TrainConfig,
         backend: str = "c",
         progress: str | None = None,
+        source_arm=None,
     ):
-        val = np.asarray(data.source.val)
+        if config.k_choice_programs == "shape_like":
+            if source_arm is None:
+                raise ValueError(
+                    'k_choice_programs "shape_like" simulates the programs\' D_s targets: pass'
+                    ' source_arm=mjx_arm.load(model, domain="source")'
+                )
+            val = shape_like_samples(source_arm, data, config)
+        else:
+            val = np.asarray(data.source.val)
         n_steps = val.shape[1]
         if config.k_choice_seconds:
             n_steps = min(n_steps, max(1, round(config.k_choice_seconds * CONTROL_HZ)))

@@ -40,6 +40,7 @@ from ccgan.cli import (
 )
 from ccgan.config import (
     FEEDBACK_IMPLS,
+    K_CHOICE_PROGRAMS,
     RENAMED_FIELDS,
     RETIRED_FEEDBACK_IMPLS,
     TrainConfig,
@@ -609,7 +610,10 @@ def simulator_choice_from_args(parser, args, config: TrainConfig, data: Translat
             f" data come from an arm with hash {d_c.model_hash}: pass that arm's MJCF as --model"
         )
     label = None if args.no_progress else "k in the simulator"
-    return SimulatorChoice(arm, data, config, progress=label)
+    source_arm = None
+    if config.k_choice_programs == "shape_like":
+        source_arm = mjx_arm.load(args.model, domain="source")
+    return SimulatorChoice(arm, data, config, progress=label, source_arm=source_arm)
 
 
 def forward_splits_from_args(parser, args, config: TrainConfig, data, d_s, d_c) -> dict:
@@ -685,7 +689,11 @@ def build_parser() -> argparse.ArgumentParser:
         " --forward-open-loop, about the feedback horizon window_length x k",
     )
     add_config_flags(parser, ForwardConfig, prefix="forward-")
-    add_config_flags(parser, TrainConfig, choices={"feedback_impl": FEEDBACK_IMPLS})
+    add_config_flags(
+        parser,
+        TrainConfig,
+        choices={"feedback_impl": FEEDBACK_IMPLS, "k_choice_programs": K_CHOICE_PROGRAMS},
+    )
     return parser
 
 

@@ -52,7 +52,7 @@ from ccgan.cli import (
     data_from_args,
 )
 from ccgan.config import TrainConfig, check_forward_config
-from ccgan.sim_choice import SimulatorChoice
+from ccgan.sim_choice import SimulatorChoice, describe_programs
 from ccgan.train import data_fingerprint
 from mjx_arm.dataset import DatasetError
 from mjx_arm.machine import cpu_model
@@ -180,6 +180,7 @@ def run_study(
     trials_per_batch: int = 8,
     backend: str = "c",
     progress: bool = False,
+    arm_s=None,
 ) -> optuna.Study:
     """Adds `n_trials` trials, in batches, to the study `study_name` in `storage`.
 
@@ -198,6 +199,8 @@ def run_study(
       forward_workdir: a `ccgan.train` workdir whose forward_c.ckpt to use, or None.
       seed: sampler seed (offset by the trials stored) and the training seed of every trial.
       timeout_s: start no new batch after this many seconds (None: run all n_trials).
+      arm_s: the source-domain arm; needed when base.k_choice_programs is "shape_like" (it
+        simulates the held-out programs' targets).
       trials_per_batch: trials trained together as one vmapped program.
       backend: the simulator of the scoring rollouts, "c" or "mjx".
       progress: progress bars over the scoring rollouts.
@@ -249,13 +252,13 @@ def run_study(
         length = configs[0].window_length
         if length not in prepared:
             data = data_lib.prepare(ps, xs, pc, xc, length, base.n_val, None, bounds=bounds)
-            judge = SimulatorChoice(arm_c, data, configs[0], backend)
+            judge = SimulatorChoice(arm_c, data, configs[0], backend, source_arm=arm_s)
             prepared[length] = (data, judge.stretch_only_errors())
         data, stretch_only = prepared[length]
         group = tuple(fixed.items())
         if group not in trainers:
             label = "scoring" if progress else None
-            judge = SimulatorChoice(arm_c, data, configs[0], backend, label)
+            judge = SimulatorChoice(arm_c, data, configs[0], backend, label, source_arm=arm_s)
             trainers[group] = BatchTrainer(data, forward_c(data, length), judge, fconf.model)
         trainer = trainers[group]
         pruned: set[int] = set()
@@ -427,9 +430,9 @@ def write_report(summ: dict, report_dir: str | Path, note: str = "") -> dict[str
         f" ({n_pruned} pruned) in `{summ['storage']}`",
         f"- Budget per trial: {base['epochs']} epochs, seed {summ['seed']}; scored and pruned"
         f" every {base['stretch_every']} epochs",
-        f"- Objective: mean X_err (cm) of the {base['n_val']} held-out D_s programs' first"
-        f" {base['k_choice_seconds']:g} s, translated by G_c and held k periods from rest in the"
-        f" D_c simulator, at the k of {tuple(base['hold_factors'])} that scores best"
+        f"- Objective: mean X_err (cm) of {describe_programs(base)}, translated by G_c and"
+        " held k periods from rest in the D_c simulator, at the k of"
+        f" {tuple(base['hold_factors'])} that scores best"
         " (`ccgan.sim_choice`). Stretch only: the untranslated programs at that k.",
         f"- Sampler: TPE, seed {summ['seed']} (+ trials already stored), one structure per batch"
         " of trials; median pruner",
@@ -582,6 +585,9 @@ def main(argv=None) -> None:
         args.trials_per_batch,
         args.backend,
         progress=not args.no_progress,
+        arm_s=mjx_arm.load(args.model, domain="source")
+        if base.k_choice_programs == "shape_like"
+        else None,
     )
     extra = {
         "command": "python -m ccgan.tune " + shlex.join(sys.argv[1:] if argv is None else argv),

@@ -42,9 +42,9 @@ import numpy as np
 from ccgan import checkpoint
 from ccgan import data as data_lib
 from ccgan.batch import BatchTrainer
-from ccgan.config import TrainConfig
+from ccgan.config import K_CHOICE_PROGRAMS, TrainConfig
 from ccgan.forward import ForwardConfig
-from ccgan.sim_choice import SimulatorChoice
+from ccgan.sim_choice import SimulatorChoice, describe_programs
 from mjx_arm.atomic import write_atomically
 from mjx_arm.dataset import load_dataset
 from mjx_arm.machine import cpu_model
@@ -150,7 +150,7 @@ def write_report(out: Path, report: dict) -> None:
         "# CCGAN-GP ablation on held-out programs",
         "",
         "Each row: one variant, its seeds trained in one vmapped batch, scored on the study"
-        " folder's held-out D_s programs (their first k_choice_seconds) held k periods from rest"
+        " batch's held-out D_s programs (named under its title) held k periods from rest"
         " in the D_c simulator (MuJoCo C), at the k each member chose among the hold factors."
         " Final: after the last epoch; best: the scored epoch with the lowest error (picked on"
         " the same programs). Mean +- std over seeds (cm); ratio: final / stretch only at the"
@@ -163,7 +163,7 @@ def write_report(out: Path, report: dict) -> None:
             "",
             f"`{b['command']}`; {b['machine']}; {b['wall_s']:.0f} s. Data: {b['data']}; F_c:"
             f" {b['forward_c']}; {b['config']['epochs']} epochs, scored every"
-            f" {b['config']['stretch_every']}. Stretch only: "
+            f" {b['config']['stretch_every']} on {describe_programs(b['config'])}. Stretch only: "
             + ", ".join(f"{v:.3f} cm at k = {k}" for k, v in b["stretch_only_cm"].items())
             + ".",
             "",
@@ -193,6 +193,8 @@ def main(argv=None) -> None:
     p.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])
     p.add_argument("--hold-factors", type=int, nargs="+", default=[10, 15, 20])
     p.add_argument("--k-choice-seconds", type=float, default=20.0)
+    p.add_argument("--k-choice-programs", choices=K_CHOICE_PROGRAMS, default="babbling")
+    p.add_argument("--k-choice-n-programs", type=int, default=12)
     p.add_argument("--window-length", type=int, default=10)
     p.add_argument("--critic-steps", type=int, default=1)
     p.add_argument("--gen-per-sample", action="store_true")
@@ -212,6 +214,7 @@ def main(argv=None) -> None:
         base = TrainConfig(
             epochs=a.epochs, stretch_every=a.stretch_every, hold_factors=tuple(a.hold_factors),
             k_choice_seconds=a.k_choice_seconds, window_length=a.window_length,
+            k_choice_programs=a.k_choice_programs, k_choice_n_programs=a.k_choice_n_programs,
             critic_steps=a.critic_steps, gen_per_sample=a.gen_per_sample,
             gen_residual=a.gen_residual, **small,
         )  # fmt: skip
@@ -228,7 +231,7 @@ def main(argv=None) -> None:
     except (ValueError, OSError, checkpoint.CheckpointError) as err:
         p.error(str(err))
     configs = [dataclasses.replace(base, **v) for v in VARIANTS.values()]
-    judge = SimulatorChoice(study.arm_c, data, base)
+    judge = SimulatorChoice(study.arm_c, data, base, source_arm=study.arm_s)
     stretch_only = dict(zip(base.hold_factors, judge.stretch_only_errors().tolist(), strict=True))
     start = time.perf_counter()
     result = BatchTrainer(data, fc_params, judge, fc_model).train(configs, a.seeds)

@@ -16,7 +16,7 @@ import pytest
 
 from mjx_arm import atomic, babble, dataset
 from mjx_arm.babble import cli as babble_cli
-from mjx_arm.programs import babble_programs
+from mjx_arm.programs import babble_programs, shape_like_programs
 from mjx_arm.dataset import DatasetError, ModelHashMismatchError
 
 CONFIG = babble.BabbleConfig(n_train=3, n_val=1, duration_s=2.0, chunk=2, backend="c")
@@ -194,6 +194,23 @@ def test_cli_writes_one_file_per_domain_and_split(tmp_path, xml, monkeypatch):
     np.testing.assert_array_equal(d.pressures_bar, expected)
 
 
+def test_cli_babbles_shape_like_programs_in_unpaired_streams(tmp_path, xml):
+    """--programs shape_like: each (domain, split) is its own shape_like_programs stream."""
+    model = tmp_path / "arm.xml"
+    model.write_text(xml)
+    argv = ["--programs", "shape_like", "--n", "2", "--n-val", "1", "--duration", "1"]
+    argv += ["--model", str(model), "--out", str(tmp_path / "out"), "--no-progress"]
+    assert babble_cli.main(argv) == 0
+    src = dataset.load_dataset(tmp_path / "out" / "source_train.npz")
+    con = dataset.load_dataset(tmp_path / "out" / "constrained_train.npz")
+    expected = shape_like_programs(2, 1.0, 0, split="babble/source/train")
+    np.testing.assert_array_equal(src.pressures_bar, expected)
+    assert not np.array_equal(src.pressures_bar, con.pressures_bar)
+    assert src.config["programs"] == "shape_like"
+    with pytest.raises(ValueError, match="programs must be one of"):
+        babble.BabbleConfig(programs="shapes")
+
+
 def test_load_refuses_mismatched_model_hash(datasets, tmp_path):
     path = dataset.save_dataset(tmp_path / "a.npz", datasets[0])
     with pytest.raises(ModelHashMismatchError, match="expected 0123"):
@@ -266,7 +283,7 @@ def test_two_devices_pad_shard_and_match_c(tmp_path, xml):
 import dataclasses, numpy as np
 import mjx_arm, jax
 from mjx_arm import babble
-from mjx_arm.programs import babble_programs
+from mjx_arm.programs import babble_programs, shape_like_programs
 assert len(jax.devices()) == 2
 arm = mjx_arm.load(xml=open({str(tmp_path / "arm.xml")!r}).read())
 programs = babble_programs(babble.BabbleConfig(duration_s=1.0), np.arange(3))

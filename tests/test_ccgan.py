@@ -22,7 +22,8 @@ from ccgan import data as data_lib
 from ccgan import forward as forward_lib
 from ccgan import train as train_lib
 from mjx_arm.programs import random_held_programs
-from tracking import metrics
+from tracking import held, metrics
+from tracking.config import ConfigError
 
 # ----------------------------------------------------------------------------- data
 
@@ -414,7 +415,6 @@ def test_end_to_end_and_resume_equals_uninterrupted(tiny_setup, tmp_path):
 def test_k_chosen_in_the_target_arm_like_the_authors_and_resumed_exactly(tiny_setup, tmp_path):
     """k_choice "simulator": G_c's held-out commands run in the D_c arm at every k, per seed."""
     from ccgan.sim_choice import SimulatorChoice
-    from tracking import held
 
     data, fconf, fparams, _, _ = tiny_setup
     xml = mjx_arm.generate_xml(dataclasses.replace(mjx_arm.ArmParams(), n_segments=3))
@@ -566,7 +566,8 @@ def test_two_devices_train_like_one(tiny_setup, tmp_path):
 import dataclasses, pickle, numpy as np
 import mjx_arm, jax
 from ccgan import config as config_lib, train as train_lib
-from tracking import metrics
+from tracking import held, metrics
+from tracking.config import ConfigError
 assert len(jax.devices()) == 2
 data, fconf, fparams = pickle.loads(open({str(tmp_path / "setup.pkl")!r}, "rb").read())
 config = config_lib.TrainConfig(**{config.to_dict()!r})
@@ -591,3 +592,42 @@ print("ok")
     with np.load(tmp_path / "two.npz") as two:
         for name in ("critic_total", "generator_total", "feedback", "cycle", "identity"):
             np.testing.assert_allclose(metrics[name], two[name], rtol=2e-3, atol=1e-6)
+
+
+def test_k_chosen_on_held_out_shape_like_programs(tiny_setup):
+    """k_choice_programs "shape_like": the judge scores on shape-like programs (never a test
+    shape) whose D_s targets it simulates from rest, not on the training data's babbling."""
+    from ccgan.sim_choice import SHAPE_LIKE_SPLIT, SimulatorChoice, describe_programs
+    from mjx_arm.programs import shape_like_programs
+
+    data = tiny_setup[0]
+    xml = mjx_arm.generate_xml(dataclasses.replace(mjx_arm.ArmParams(), n_segments=3))
+    arm_s, arm_c = (mjx_arm.load(xml=xml, domain=d) for d in ("source", "constrained"))
+    config = dataclasses.replace(
+        TINY,
+        hold_factors=(1, 3),
+        k_choice_seconds=2.0,
+        k_choice_programs="shape_like",
+        k_choice_n_programs=2,
+    )
+    with pytest.raises(ValueError, match="source_arm"):
+        SimulatorChoice(arm_c, data, config)
+    with pytest.raises(ConfigError, match="k_choice_programs"):
+        dataclasses.replace(config, k_choice_programs="shapes")
+    with pytest.raises(ConfigError, match="k_choice_seconds"):
+        dataclasses.replace(config, k_choice_seconds=0.0)
+
+    judge = SimulatorChoice(arm_c, data, config, source_arm=arm_s)
+    programs = shape_like_programs(2, 2.0, seed=0, split=SHAPE_LIKE_SPLIT, full_scale=True)
+    assert judge._samples.shape == (2, 20, 9)
+    np.testing.assert_allclose(
+        data_lib.denormalise_pressure(np.asarray(judge._samples[..., :3])), programs, atol=1e-5
+    )
+    targets = arm_s.rollout(programs.astype(np.float64), backend="c")
+    np.testing.assert_allclose(judge.target, targets, atol=1e-5)
+    # Stretch only on those programs, by hand at k = 3.
+    poses = held.every_kth(arm_c.rollout(held.stretch(programs, 3), backend="c"), 3)
+    expected = metrics.position_error_cm(poses, targets).mean()
+    assert judge.stretch_only_errors()[1] == pytest.approx(expected, rel=1e-4)
+    assert "2 held-out shape-like" in describe_programs(config.to_dict())
+    assert "babbling" in describe_programs(TINY.to_dict())

@@ -62,11 +62,25 @@ from mujoco import mjx
 
 from mjx_arm import arm as arm_lib
 from mjx_arm import constants, dataset, domains
-from mjx_arm.programs import babble_programs
+from mjx_arm.programs import babble_programs, shape_like_programs
 
 BACKENDS = ("auto", "mjx", "c")
 #: Largest MuJoCo C batch per call, `Arm.rollout`'s own (see `mjx_arm.arm.C_CHUNK`).
 C_MAX_CHUNK = arm_lib.C_CHUNK
+
+
+#: The program families `BabbleConfig.programs` can name.
+PROGRAM_FAMILIES = ("babbling", "shape_like")
+
+
+def family_programs(config: BabbleConfig, n: int, domain: str, split: str) -> np.ndarray:
+    """The first n programs [n, T, 3] (bar, float32) of a (domain, split) stream of the
+    config's family; each domain and split has its own stream (the domains are unpaired)."""
+    if config.programs == "shape_like":
+        return shape_like_programs(
+            n, config.n_steps / constants.CONTROL_HZ, config.seed, split=f"babble/{domain}/{split}"
+        )
+    return babble_programs(config, np.arange(n), domain=domain, split=split)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -98,10 +112,16 @@ class BabbleConfig:
     """"mjx", "c" (MuJoCo C on all CPU cores) or "auto" (c when JAX runs on the CPU)."""
     chunk: int = 4096
     """Trajectories simulated at once (over all devices); bounds device memory."""
+    programs: str = "babbling"
+    """The program family: "babbling" (held random targets, the paper's) or "shape_like"
+    (`mjx_arm.programs.shape_like_programs`: random ellipses, polygons, staircases and phase
+    jumps, never a test shape; the hold and pressure-range fields are then unused)."""
 
     def __post_init__(self):
         if self.backend not in BACKENDS:
             raise ValueError(f"backend must be one of {BACKENDS}, got {self.backend!r}")
+        if self.programs not in PROGRAM_FAMILIES:
+            raise ValueError(f"programs must be one of {PROGRAM_FAMILIES}, got {self.programs!r}")
         if self.seed < 0:
             raise ValueError(f"seed must be >= 0 (NumPy seeds), got {self.seed}")
         if min(self.n_train, self.n_val) < 0 or self.n_train + self.n_val == 0:
@@ -464,7 +484,7 @@ def babble(
             sharded = ShardedRollout(arm) if backend == "mjx" else None
             for split, n in splits.items():
                 bar.set_postfix_str(f"{domain}/{split}")
-                programs = babble_programs(config, np.arange(n), domain=domain, split=split)
+                programs = family_programs(config, n, domain, split)
                 _check_processes_agree(config, backend, arm, programs)
                 poses = simulate(
                     arm,

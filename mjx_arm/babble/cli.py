@@ -24,6 +24,7 @@ from mjx_arm.babble import (
     BACKENDS,
     C_MAX_CHUNK,
     PAPER,
+    PROGRAM_FAMILIES,
     BabbleConfig,
     NotEnoughMemoryError,
     check_memory,
@@ -111,6 +112,13 @@ def _add_program_options(p: argparse.ArgumentParser) -> None:
     )
     p.add_argument(
         "--seed", type=_int_at_least(0), default=PAPER.seed, help="root seed of the programs"
+    )
+    p.add_argument(
+        "--programs",
+        choices=PROGRAM_FAMILIES,
+        default=PAPER.programs,
+        help="babbling (held random targets, the paper's) or shape_like (random ellipses,"
+        " polygons, staircases and phase jumps, never a test shape; --hold-* unused)",
     )
     p.add_argument(
         "--hold-min", type=_positive_seconds, default=PAPER.hold_min_s, help="shortest hold (s)"
@@ -238,6 +246,7 @@ def config_from_args(args: argparse.Namespace) -> BabbleConfig:
         domains=tuple(name.strip() for name in names),
         backend=args.backend,
         chunk=args.chunk,
+        programs=args.programs,
     )
 
 
