@@ -19,16 +19,6 @@
 #      --stretch-every 40 (studies.ccgan_budget: the study's budget against a longer training)
 set -uo pipefail
 source "$(dirname "${BASH_SOURCE[0]}")/../bench/device/install.sh" || exit 1
-# optuna and its needs (not on the GPU image), each wheel installed unless already there.
-if compgen -G ".whl-optuna/*.whl" >/dev/null; then
-  for whl in .whl-optuna/*.whl; do
-    name=$(basename "$whl" | cut -d- -f1 | tr '[:upper:]' '[:lower:]')
-    $PY -c "import importlib.metadata as m; m.version('$name')" >/dev/null 2>&1 && continue
-    # Into a folder of its own, then merged: mujoco-mjx adds mujoco/mjx to mujoco's folder.
-    rm -rf "$TMP/one" && $PY -m pip install -q --no-index --no-deps --no-compile --target \
-      "$TMP/one" "$whl" && cp -a "$TMP/one/." "$SITE/" || exit 1
-  done
-fi
 $PY - <<'PYEOF'
 from importlib import metadata
 for d in ("optuna", "sqlalchemy", "alembic", "matplotlib", "tqdm", "flax", "optax"):
@@ -73,11 +63,14 @@ hard=$((${CALL_SECONDS:-560} - (SECONDS - start) - 15))
 NAME=${STUDY_NAME:-ccgan_paper_scale}
 REPORT=$RUN/report
 [[ $NAME != ccgan_paper_scale ]] && REPORT=$RUN/report_$NAME
+# TUNE_ARGS: more ccgan.tune flags, after the defaults (so they win), e.g. "--k-choice-programs
+# shape_like --k-choice-n-programs 6 --k-choice-seconds 30 --hold-factors 15 20".
+# shellcheck disable=SC2086
 timeout "$hard" $PY -m ccgan.tune $DATA --model $MODEL \
   --forward-workdir "${FORWARD_WORKDIR:-$RUN/forward}" --storage "$RUN/study.db" --study-name "$NAME" \
   --n-trials 256 --trials-per-batch "${TRIALS_PER_BATCH:-16}" --timeout-s "${STUDY_SECONDS:-300}" \
   --epochs 40 --stretch-every 20 --hold-factors 10 15 20 --k-choice-seconds 20 \
-  --report-dir "$REPORT" --no-progress
+  --report-dir "$REPORT" --no-progress ${TUNE_ARGS:-}
 echo "study call: $((SECONDS - start)) s"
 tar -czf "$OUT/ccgan_study.tar.gz" -C "$TMP" ccgan_study
 ls -la "$OUT"

@@ -11,7 +11,8 @@
 #      0.5-3 s holds) and "long" (400 x 120 s in D_c, 1-40 s holds); then the F_c runs.
 #   3. bash studies/issue29_gpu.sh ablation "LABEL" [studies.ccgan_ablation flags] [-- "LABEL2" ...]
 #      `--forward-c best` takes the F_c of the forward study with the lowest X_err at k = 15;
-#      `--gan-data scale-data` the "scale" babbling; `--setting-from /tmp/ccgan_study/study.db:NAME`
+#      `--gan-data scale-data` the "scale" babbling; `--gan-data shape-data` 200 + 1 shape-like
+#      programs of 60 s per domain (babbled here on first use); `--setting-from /tmp/ccgan_study/study.db:NAME`
 #      the best trial of a study that studies/ccgan_study.sh ran on this machine (optuna installed).
 set -uo pipefail
 source "$(dirname "${BASH_SOURCE[0]}")/../bench/device/install.sh" || exit 1
@@ -74,6 +75,12 @@ PYEOF
       done
       for i in "${!flags[@]}"; do
         [[ ${flags[$i]} == scale-data ]] && flags[$i]=$RUN/babble_scale
+        if [[ ${flags[$i]} == shape-data ]]; then
+          flags[$i]=$RUN/babble_shape
+          [[ -f $RUN/babble_shape/manifest.json ]] || $PY -m mjx_arm.babble --backend c \
+            --model $MODEL --out "$RUN/babble_shape" --no-progress --programs shape_like \
+            --domain both --n 200 --n-val 1 --seed 13 --duration 60 || exit 1
+        fi
       done
       timeout $((570 - (SECONDS - start))) $PY -m studies.ccgan_ablation --study-dir $STUDY \
         --label "$label" "${flags[@]}" --out "$RUN/ablation"

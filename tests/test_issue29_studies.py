@@ -90,6 +90,15 @@ def test_forward_data_and_the_ablation_run_end_to_end(study_folder, tmp_path, ca
     finals = [tuple(v["final_cm"]) for v in batch["variants"].values()]
     assert len(set(finals)) > 1
     assert "| no feedback |" in (abl / "ablation.md").read_text()
+    # Two variants, scored on a held-out shape-like program: a second batch of the report.
+    ccgan_ablation.main([*flags, "--label", "shape", "--forward-c", str(fc), "--variants", "full",
+                         "no adversarial", "--k-choice-programs", "shape_like",
+                         "--k-choice-n-programs", "1"])  # fmt: skip
+    report = json.loads((abl / "ablation.json").read_text())["batches"]
+    assert list(report) == ["tiny", "shape"]
+    assert list(report["shape"]["variants"]) == ["full", "no adversarial"]
+    assert report["shape"]["stretch_only_cm"] != batch["stretch_only_cm"]  # other programs
+    assert "1 held-out shape-like D_s programs" in (abl / "ablation.md").read_text()
 
     # An F_c normalised with other pose bounds is refused before any training.
     params, meta = checkpoint.load(fc)

@@ -8,7 +8,7 @@
 # (2) installs the mujoco wheels once (sha256 checked) with
 #     pip install --no-index --no-deps --target $TMP/site;
 # (3) once $TMP/wp holds every piece of the warp-lang wheel (the joined file's sha256 matches),
-#     installs it the same way; then prints the versions it sees.
+#     installs it the same way; (4) the wheels of .whl-optuna; then prints the versions it sees.
 # Sets SITE, OUT, PY, PYTHONPATH, MUJOCO_GL=disable and PYTHONUNBUFFERED for the caller.
 # $TMP stays as a call left it while the machine is warm (30 s after a call ends); a fresh
 # machine starts bare. Wheels come from bench/device/fetch_wheels.sh, run here first.
@@ -73,9 +73,20 @@ if ! $PY -c "import warp" >/dev/null 2>&1 && [[ -f $WP/SHA256SUMS ]]; then
     echo "warp wheel not complete yet (sha256 of the joined pieces does not match)"
   fi
 fi
+# (4) optuna and its needs (not on the GPU image) when .whl-optuna was carried (pip download
+#     optuna and matplotlib for Python 3.12 into it), each wheel installed unless already there.
+if compgen -G ".whl-optuna/*.whl" >/dev/null; then
+  for whl in .whl-optuna/*.whl; do
+    name=$(basename "$whl" | cut -d- -f1 | tr '[:upper:]' '[:lower:]')
+    $PY -c "import importlib.metadata as m; m.version('$name')" >/dev/null 2>&1 && continue
+    # Into a folder of its own, then merged: mujoco-mjx adds mujoco/mjx to mujoco's folder.
+    rm -rf "$TMP/one" && $PY -m pip install -q --no-index --no-deps --no-compile --target \
+      "$TMP/one" "$whl" && cp -a "$TMP/one/." "$SITE/" || exit 1
+  done
+fi
 $PY - <<'EOF'
 from importlib import metadata
-for d in ("jax", "jaxlib", "mujoco", "mujoco-mjx", "warp-lang", "numpy"):
+for d in ("jax", "jaxlib", "mujoco", "mujoco-mjx", "warp-lang", "numpy", "optuna"):
     try:
         print(f"  {d} {metadata.version(d)}")
     except metadata.PackageNotFoundError:
