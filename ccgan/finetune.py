@@ -121,6 +121,9 @@ class FinetuneConfig:
     """Seed of the programs and of the batch order."""
     max_wall_s: float = 0.0
     """Stop after this many seconds (0: no limit); the best iterate so far is kept."""
+    hold_factor: int = 0
+    """k, the control periods each command is held, for every fine-tuned translator (0: the
+    translators' own, which must agree); the written files record it."""
 
     def __post_init__(self):
         """Refuses settings that would fail late or compute nothing (ConfigError names the field).
@@ -148,6 +151,7 @@ class FinetuneConfig:
                 "eval_every": 1,
                 "seed": 0,
                 "max_wall_s": 0,
+                "hold_factor": 0,
             },
             above={"learning_rates": 0},
         )
@@ -423,7 +427,7 @@ def finetune(
     """
     import jax.numpy as jnp
 
-    k = common_k(translators)
+    k = config.hold_factor or common_k(translators)
     tr = translators[0]
     t0 = time.perf_counter()
     data = finetune_data(config, arm_s, tr.bounds, log)
@@ -431,7 +435,7 @@ def finetune(
     opt, trained, opt_state, anchor_weights = init_members(translators, members, config)
     step = make_finetune_step(tr, arm_c, k, config, data.window_steps, opt)
     validate = make_validation(tr, arm_c, k, data)
-    history = _new_history(members)
+    history = _new_history(members) | {"k": int(k)}
     best = BestIterates.start(trained, _record_validation(history, 0, validate(trained)))
     log(f"validation X_err before fine-tuning (cm): {np.round(best.score, 4).tolist()}")
     rng = np.random.default_rng(config.seed)
@@ -483,6 +487,11 @@ def main(argv=None) -> None:
     a = p.parse_args(argv)
     config = config_from_args(p, a, FinetuneConfig)
     stage = start_stage(p, a, "ccgan.finetune", config.to_dict(), argv)
+    if config.hold_factor == 0:
+        try:
+            common_k(stage.translators)
+        except ValueError as err:
+            p.error(f"{err}: give --hold-factor")
 
     def write(params, history) -> None:
         """The best translators so far and the history (rewritten at every validation, so a
@@ -494,7 +503,7 @@ def main(argv=None) -> None:
             | {"val_x_err_cm_best": history["best_val_x_err_cm"][s_i]}
             for s_i in range(len(stage.seeds))
         ]
-        stage.write(params, per_seed, history, "finetune.json")
+        stage.write(params, per_seed, history, "finetune.json", k=history["k"])
 
     params, history = finetune(
         stage.translators, stage.arm_s, stage.arm_c, config, on_validation=write

@@ -9,6 +9,7 @@
 #   2. carry [".whl-extra2"]: bash studies/issue29_gpu.sh forward
 #      babbling on the host's cores (MuJoCo C): "scale" (400 x 60 s per domain, the paper's
 #      0.5-3 s holds) and "long" (400 x 120 s in D_c, 1-40 s holds); then the F_c runs.
+#   3. carry [".finetune_in"]: bash studies/issue29_gpu.sh finetune [ccgan.finetune flags]
 #   3. bash studies/issue29_gpu.sh ablation "LABEL" [studies.ccgan_ablation flags] [-- "LABEL2" ...]
 #      `--forward-c best` takes the F_c of the forward study with the lowest X_err at k = 15;
 #      `--gan-data scale-data` the "scale" babbling; `--gan-data shape-data` 200 + 1 shape-like
@@ -92,8 +93,16 @@ PYEOF
   done
   pack
   ;;
+finetune)
+  # ccgan.finetune (feedback through the MJX simulator) from the chain's CCGAN-GP, carried in
+  # .finetune_in/ (translator_seed{0,1,2}.ckpt of runs/paper/ccgan); ccgan.finetune flags follow.
+  shift
+  timeout $((570 - (SECONDS - start))) $PY -m ccgan.finetune --model $MODEL \
+    --translators .finetune_in/translator_seed{0,1,2}.ckpt --seeds 0 1 2 --out "$RUN/finetune" "$@"
+  pack
+  ;;
 *)
-  echo "usage: bash studies/issue29_gpu.sh install|forward|ablation ..." >&2
+  echo "usage: bash studies/issue29_gpu.sh install|forward|ablation|finetune ..." >&2
   exit 2
   ;;
 esac

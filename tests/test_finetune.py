@@ -103,6 +103,13 @@ def test_finetune_rejects_translators_with_different_k(arms):
     other = dataclasses.replace(shipped, k=shipped.k + 5)
     with pytest.raises(ValueError, match="disagree on k"):
         finetune.finetune([shipped, other], *arms, finetune.FinetuneConfig(steps=1))
+    # With hold_factor, both are fine-tuned at that k, and the history records it.
+    tiny = finetune.FinetuneConfig(
+        steps=1, batch_size=1, window_s=0.2, n_train=1, n_val=1, anchor_s=0.4, n_anchor=1,
+        val_long_s=0.3, learning_rates=(1e-4,), anchor_weights=(0.0,), hold_factor=2,
+    )  # fmt: skip
+    params, history = finetune.finetune([shipped, other], *arms, tiny, progress=False)
+    assert len(params) == 2 and history["k"] == 2
 
 
 def test_finetune_program_families():
