@@ -4,7 +4,8 @@ CCGAN-GP's feedback loss rates G_c's commands by F_c's prediction: each 10-step 
 program, G_c's commands held k periods, run through F_c from the D_s pose before the window
 (`ccgan.trainer`'s feedback rollout), against the D_s poses. This study scores the same commands
 both ways on held-out shape-like programs (`shape_like_programs` split "fc_floor", full scale,
-never a test shape): stretch only (the D_s commands themselves) and each seed's trained G_c.
+never a test shape): stretch only (the D_s commands themselves) and each given translator's G_c
+(default: the chain's CCGAN-GP and its fine-tune through the MJX simulator, `ccgan.finetune`).
 
   - "simulator": X_err (cm) of the whole program held k periods from rest in the D_c simulator
     (MuJoCo C), every k-th pose against the D_s poses (what `eval` and the issue's target score);
@@ -17,6 +18,8 @@ loss teaches G_c to correct F_c's error, not the arm's.
 """
 
 from __future__ import annotations
+
+from pathlib import Path
 
 import jax
 import jax.numpy as jnp
@@ -38,9 +41,12 @@ from ccgan.translator import load_translator
 from mjx_arm.programs import shape_like_programs
 from tracking import held, metrics
 
-#: The chain's CCGAN-GP, trained with the open-loop F_c (studies/results/h200/issue29/chain).
+#: The chain's CCGAN-GP (studies/results/h200/issue29/chain) and its fine-tune through the MJX
+#: simulator (studies/results/h200/issue29/finetune), one file per seed.
 DEFAULT_TRANSLATORS = [
-    f"studies/results/h200/issue29/chain/ccgan/translator_seed{seed}.ckpt" for seed in (0, 1, 2)
+    f"studies/results/h200/issue29/{stage}/translator_seed{seed}.ckpt"
+    for stage in ("chain/ccgan", "finetune")
+    for seed in (0, 1, 2)
 ]
 
 
@@ -83,10 +89,10 @@ def main(argv=None) -> None:
     targets = arm_s.rollout(programs.astype(np.float64), backend="c")
 
     commands = {"stretch only": programs.astype(np.float64)}
-    for seed, tr in enumerate(translators):
+    for path, tr in zip(a.translators, translators, strict=True):
         s = jnp.asarray(samples(programs, targets, tr.bounds))
         out = np.asarray(tr.generator.apply(tr.g_c_params, s), np.float64)[..., :PRESSURE_DIM]
-        commands[f"G_c seed {seed}"] = denormalise_pressure(out)
+        commands[f"{Path(path).parent.name}/{Path(path).stem}"] = denormalise_pressure(out)
     rows = {}
     for name, cmd in commands.items():
         rows[name] = {}
@@ -94,7 +100,8 @@ def main(argv=None) -> None:
             sim = metrics.position_error_cm(
                 held.run_dc(arm_c, held.stretch(cmd, k), k, "c"), targets
             )
-            # F_c of the first translator: every translator of the chain holds the same F_c.
+            # F_c of the first translator: the chain's translators and their fine-tunes hold
+            # the same F_c.
             view = feedback_view_cm(translators[0], cmd, targets, k, a.window)
             rows[name][str(k)] = {"simulator_cm": float(sim.mean()), "f_c_cm": float(view.mean())}
             print(name, k, rows[name][str(k)], flush=True)

@@ -107,3 +107,26 @@ def test_forward_data_and_the_ablation_run_end_to_end(study_folder, tmp_path, ca
     with pytest.raises(SystemExit):
         ccgan_ablation.main([*flags, "--label", "x", "--forward-c", str(other)])
     assert "other pose bounds" in capsys.readouterr().err
+
+
+def test_fc_floor_scores_commands_window_by_window_as_the_feedback_loss():
+    """studies.fc_floor: each window starts F_c at the D_s pose before it, held k periods."""
+    import mjx_arm
+    from ccgan import load_translator
+    from mjx_arm.programs import shape_like_programs
+    from studies import fc_floor
+    from tracking import held, metrics
+
+    tr = load_translator(fc_floor.DEFAULT_TRANSLATORS[0])
+    programs = shape_like_programs(2, 2.0, seed=0, split="test_fc_floor").astype(np.float64)
+    targets = mjx_arm.load("models/softarm.xml", "source").rollout(programs, backend="c")
+    k, window = 2, 10
+    got = fc_floor.feedback_view_cm(tr, programs, targets, k, window)
+    assert got.shape == (2, 20)
+    for i in range(2):
+        for w in range(2):
+            steps = slice(w * window, (w + 1) * window)
+            pose0 = targets[i, max(w * window - 1, 0)]
+            pred = tr.predict_poses(held.stretch(programs[i, steps], k), pose0)
+            want = metrics.position_error_cm(held.every_kth(pred, k), targets[i, steps])
+            np.testing.assert_allclose(got[i, steps], want, rtol=1e-4, atol=1e-5)
