@@ -359,6 +359,12 @@ def make_validation(translator: Translator, arm_c, k: int, data: FinetuneData):
     return validate
 
 
+def hold_factor(translators: list[Translator], config: FinetuneConfig) -> int:
+    """The k every translator is fine-tuned (and written) at: `config.hold_factor`, else the
+    translators' own, which must agree (ValueError otherwise)."""
+    return config.hold_factor or common_k(translators)
+
+
 def _new_history(members) -> dict:
     """The history of a fine-tune before its first step (`finetune` documents its fields)."""
     return {
@@ -427,7 +433,7 @@ def finetune(
     """
     import jax.numpy as jnp
 
-    k = config.hold_factor or common_k(translators)
+    k = hold_factor(translators, config)
     tr = translators[0]
     t0 = time.perf_counter()
     data = finetune_data(config, arm_s, tr.bounds, log)
@@ -487,11 +493,10 @@ def main(argv=None) -> None:
     a = p.parse_args(argv)
     config = config_from_args(p, a, FinetuneConfig)
     stage = start_stage(p, a, "ccgan.finetune", config.to_dict(), argv)
-    if config.hold_factor == 0:
-        try:
-            common_k(stage.translators)
-        except ValueError as err:
-            p.error(f"{err}: give --hold-factor")
+    try:
+        hold_factor(stage.translators, config)
+    except ValueError as err:
+        p.error(f"{err}: give --hold-factor")
 
     def write(params, history) -> None:
         """The best translators so far and the history (rewritten at every validation, so a

@@ -103,13 +103,9 @@ def test_finetune_rejects_translators_with_different_k(arms):
     other = dataclasses.replace(shipped, k=shipped.k + 5)
     with pytest.raises(ValueError, match="disagree on k"):
         finetune.finetune([shipped, other], *arms, finetune.FinetuneConfig(steps=1))
-    # With hold_factor, both are fine-tuned at that k, and the history records it.
-    tiny = finetune.FinetuneConfig(
-        steps=1, batch_size=1, window_s=0.2, n_train=1, n_val=1, anchor_s=0.4, n_anchor=1,
-        val_long_s=0.3, learning_rates=(1e-4,), anchor_weights=(0.0,), hold_factor=2,
-    )  # fmt: skip
-    params, history = finetune.finetune([shipped, other], *arms, tiny, progress=False)
-    assert len(params) == 2 and history["k"] == 2
+    # With hold_factor, both are fine-tuned (and written) at that k.
+    assert finetune.hold_factor([shipped, other], finetune.FinetuneConfig(hold_factor=2)) == 2
+    assert finetune.hold_factor([shipped], finetune.FinetuneConfig()) == shipped.k
 
 
 def test_finetune_program_families():
@@ -123,3 +119,16 @@ def test_finetune_program_families():
     assert babble.shape == got.shape and not np.allclose(babble, got)
     with pytest.raises(ValueError, match="programs must be one of"):
         finetune.FinetuneConfig(programs="shapes")
+
+
+def test_finetune_cli_asks_for_a_hold_factor_when_the_seeds_disagree(tmp_path, capsys):
+    """The chain's CCGAN-GP seeds chose k = 15 and 20: refused before any work without
+    --hold-factor."""
+    chain = "studies/results/h200/issue29/chain/ccgan"
+    argv = ["--translators", f"{chain}/translator_seed0.ckpt", f"{chain}/translator_seed1.ckpt",
+            "--model", "models/softarm.xml", "--out", str(tmp_path / "out")]  # fmt: skip
+    with pytest.raises(SystemExit) as exit_:
+        finetune.main(argv)
+    assert exit_.value.code == 2
+    assert "disagree on k: [15, 20]: give --hold-factor" in capsys.readouterr().err
+    assert not list(tmp_path.glob("out/*.ckpt"))
