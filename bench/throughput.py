@@ -29,8 +29,10 @@ Writes throughput{tag}.md, throughput{tag}.json and throughput{tag}_check_poses.
 tag names the overrides, and "_segments" with --segments; not the implementations or counts).
 With --append, the rows, checks and poses already there are kept (rows of the same segments,
 domain, impl and batch are replaced), so runs of one implementation or segment count after
-another end in one table. Files are rewritten after every row, so a run stopped part-way leaves
-what it measured.
+another end in one table. Every row keeps the machine it was measured on (JSON "machine" of
+each row; "machines" lists them), so a table merged or rewritten on another machine
+(--report-only) still names the machines of its rows, not its own. Files are rewritten after
+every row, so a run stopped part-way leaves what it measured.
 """
 
 from __future__ import annotations
@@ -197,12 +199,13 @@ class Results:
         if not path.exists():
             return
         old = json.loads(path.read_text())
+        # Each row keeps the machine it was measured on: its own, else its file's (files from
+        # before rows carried one). This run's machine never relabels older rows.
         for r in old.get("rows", []):
-            self.add_row(r, write=False)
+            self.add_row({"machine": old.get("machine", {}), **r}, write=False)
         for c in old.get("checks", []):
             self.add_check(c, write=False)
         self.commands = old.get("commands", []) + self.commands
-        self.machine = {**old.get("machine", {}), **self.machine}
         poses_path = path.with_name(path.stem + "_check_poses.npz")
         if poses_path.exists():
             with np.load(poses_path) as f:
@@ -220,6 +223,8 @@ class Results:
                 c["vs_jax"] = pose_diff(warp, jax_poses)
 
     def add_row(self, row: dict, write: bool = True) -> None:
+        """Adds (or replaces) a row; a row without a "machine" is this run's measurement."""
+        row = {"machine": self.machine, **row}
         self.rows = [r for r in self.rows if row_key(r) != row_key(row)] + [row]
         if write:
             self.write()
@@ -241,7 +246,7 @@ class Results:
         )
         self.checks.sort(key=lambda c: (c["segments"], domain(c["domain"]), order[c["impl"]]))
         data = {
-            "machine": self.machine,
+            "machines": self.machines(),
             "commands": self.commands,
             "rows": self.rows,
             "checks": self.checks,
@@ -251,15 +256,34 @@ class Results:
             np.savez_compressed(self.poses_path, **self.poses)
         self.md_path.write_text(self.markdown())
 
+    def machines(self) -> list[dict]:
+        """The distinct machines the rows were measured on, in row order."""
+        seen: dict[str, dict] = {}
+        for r in self.rows:
+            seen.setdefault(json.dumps(r.get("machine", {}), sort_keys=True), r.get("machine", {}))
+        return list(seen.values())
+
     def markdown(self) -> str:
-        m = self.machine
+        machines = self.machines()
         r0 = self.rows[0] if self.rows else {}
+        m = machines[0] if len(machines) == 1 else {}
+
+        def describe(m: dict) -> str:
+            return (
+                f"{m.get('accelerator')} ({m.get('backend')}), CPU {m.get('cpu')} x"
+                f" {m.get('cpu_cores')} cores; jax {m.get('jax')}, mujoco {m.get('mujoco')},"
+                f" mujoco-mjx {m.get('mujoco_mjx')}, warp-lang {m.get('warp_lang')}"
+            )
+
         lines = [
             "# Rollout throughput: MJX-JAX and MJX-Warp beside MuJoCo C",
             "",
-            f"Machine: {m.get('accelerator')} ({m.get('backend')}), CPU {m.get('cpu')} x"
-            f" {m.get('cpu_cores')} cores; jax {m.get('jax')}, mujoco {m.get('mujoco')},"
-            f" mujoco-mjx {m.get('mujoco_mjx')}, warp-lang {m.get('warp_lang')}.",
+            *(
+                [f"Machine: {describe(m)}."]
+                if len(machines) == 1
+                else ["Machines (rows from several runs; each row's is in the JSON):"]
+                + [f"- {describe(x)}" for x in machines]
+            ),
             f"Model: {r0.get('model', '')} {r0.get('overrides') or ''}; segment counts other than"
             " the committed 10 from `generate_xml(dataclasses.replace(ArmParams(),"
             " n_segments=N))`. Step at the model's timestep"
@@ -270,7 +294,9 @@ class Results:
                 for n, h in sorted({(r["segments"], r.get("model_hash")) for r in self.rows})
             )
             + ".",
-            f"MuJoCo C: `mujoco.rollout`, {m.get('cpu_cores')} threads, batch"
+            "MuJoCo C: `mujoco.rollout`, "
+            + (f"{m['cpu_cores']} threads" if m else "one thread per core of each row's machine")
+            + f", batch"
             f" {r0.get('c_batch', '?')}, measured once per segment count and domain in each run.",
             "Compile: lower + XLA compile. First-call extra: the warm-up call's time less the"
             " timed call's (Warp builds and loads its CUDA kernels then; the kernel cache"
