@@ -56,7 +56,7 @@ from ccgan.stage import (
 from ccgan.translator import Translator
 from mjx_arm.atomic import write_atomically
 from mjx_arm.programs import shape_like_programs
-from tracking import mpc
+from tracking import mpc, mpc_mjx
 from tracking.config import ConfigError, check_fields
 from tracking.held import run_dc, stretch
 from tracking.metrics import position_error_cm
@@ -99,6 +99,13 @@ class DistillConfig:
     """Seed of the programs and of the batch order."""
     max_wall_s: float = 0.0
     """Stop training after this many seconds (0: no limit); the best iterate so far is kept."""
+    teacher_backend: str = "c"
+    """Where the teacher plans: "c" (`tracking.mpc`, MuJoCo C on the host's cores, any horizon)
+    or "mjx" (`tracking.mpc_mjx`, every program at once on the accelerator, horizon 1); its
+    commands are scored in MuJoCo C either way. `bench.teacher` measures which is faster."""
+    teacher_shard: int = 0
+    """Programs the teacher plans per call, the cache written after each (0: a split at once),
+    so that a run stopped at a deadline keeps the shards it finished."""
     hold_factor: int = 0
     """k, the control periods each command is held, for the teacher and the distilled
     translators (0: the translators' own, which must agree). G_c gives one command per source
@@ -126,9 +133,18 @@ class DistillConfig:
                 "seed": 0,
                 "max_wall_s": 0,
                 "hold_factor": 0,
+                "teacher_shard": 0,
             },
             above={"head_weight": 0, "learning_rate": 0},
         )
+        if self.teacher_backend not in ("c", "mjx"):
+            raise ConfigError(
+                "teacher_backend", f"must be 'c' or 'mjx', got {self.teacher_backend!r}"
+            )
+        if self.teacher_backend == "mjx" and self.horizon_steps != 1:
+            raise ConfigError(
+                "horizon_steps", f"must be 1 with teacher_backend 'mjx', got {self.horizon_steps}"
+            )
         n_train = self.n_train + self.n_train_full
         if self.batch_size > n_train:
             raise ConfigError(
@@ -142,7 +158,10 @@ class DistillConfig:
     def teacher_key(self) -> dict:
         """The settings the cached teacher commands depend on (not the program counts)."""
         keys = ("duration_s", "horizon_steps", "iterations", "seed")
-        return {key: getattr(self, key) for key in keys}
+        key = {name: getattr(self, name) for name in keys}
+        if self.teacher_backend != "c":  # caches of the C teacher keep their key
+            key["teacher_backend"] = self.teacher_backend
+        return key
 
 
 def teacher_data(
@@ -179,28 +198,33 @@ def teacher_data(
         except (OSError, ValueError, KeyError) as err:
             log(f"{cache} is unreadable ({err}); recomputing")
     mpc_cfg = mpc.MpcConfig(horizon_steps=config.horizon_steps, iterations=config.iterations)
+    track = mpc_mjx.track if config.teacher_backend == "mjx" else mpc.track
     for split, n, full_scale in splits:
-        have = len(store.get(f"p_{split}", ()))
         if n == 0:
             continue
-        if have >= n:
+        if len(store.get(f"p_{split}", ())) >= n:
             log(f"teacher: {n} {split} programs read from {cache}")
             continue
-        t0 = time.perf_counter()
-        programs = shape_like_programs(
+        all_programs = shape_like_programs(
             n, config.duration_s, seed=config.seed, split=f"distill/{split}", full_scale=full_scale
-        )[have:]
-        targets = arm_s.rollout(programs, backend="c")
-        commands, _ = mpc.track(arm_c, targets, k, programs, mpc_cfg, progress=progress)
-        new = {"p": programs, "x": targets, "c": commands[:, k - 1 :: k]}
-        for name, value in new.items():
-            old = store.get(f"{name}_{split}", np.zeros((0,) + value.shape[1:], np.float32))
-            store[f"{name}_{split}"] = np.concatenate([old, value.astype(np.float32)])
-        wall_s = time.perf_counter() - t0
-        log(f"teacher: {n - have} new {split} programs of {config.duration_s} s ({wall_s:.0f} s)")
-        if cache is not None:  # kept after each split: a run stopped later plans only the rest
-            cache.parent.mkdir(parents=True, exist_ok=True)
-            write_atomically(cache, lambda f: np.savez_compressed(f, key=key, **store))
+        )
+        while (have := len(store.get(f"p_{split}", ()))) < n:
+            t0 = time.perf_counter()
+            programs = all_programs[have : have + (config.teacher_shard or n)]
+            targets = arm_s.rollout(programs, backend="c")
+            commands, _ = track(arm_c, targets, k, programs, mpc_cfg, progress=progress)
+            new = {"p": programs, "x": targets, "c": commands[:, k - 1 :: k]}
+            for name, value in new.items():
+                old = store.get(f"{name}_{split}", np.zeros((0,) + value.shape[1:], np.float32))
+                store[f"{name}_{split}"] = np.concatenate([old, value.astype(np.float32)])
+            wall_s = time.perf_counter() - t0
+            log(
+                f"teacher ({config.teacher_backend}): {len(programs)} new {split} programs of"
+                f" {config.duration_s} s ({wall_s:.0f} s), {have + len(programs)} of {n}"
+            )
+            if cache is not None:  # kept after each shard: a run stopped later plans the rest
+                cache.parent.mkdir(parents=True, exist_ok=True)
+                write_atomically(cache, lambda f: np.savez_compressed(f, key=key, **store))
     data = {}
     for part in ("p", "x", "c"):
         for joined in ("train", "val"):
@@ -459,6 +483,12 @@ def build_parser() -> argparse.ArgumentParser:
     """The options of `python -m ccgan.distill`."""
     p = stage_parser("ccgan.distill", __doc__)
     add_config_flags(p, DistillConfig)
+    p.add_argument(
+        "--teacher-only",
+        action="store_true",
+        help="plan the teacher's commands into --out/teacher.npz and stop (a later run with the"
+        " same flags trains on them): to split a long run into calls",
+    )
     return p
 
 
@@ -474,6 +504,18 @@ def main(argv=None) -> None:
             common_k(stage.translators)
         except ValueError as err:
             p.error(f"{err}: give --hold-factor")
+
+    if a.teacher_only:
+        k = config.hold_factor or common_k(stage.translators)
+        data = teacher_data(
+            config, stage.arm_s, stage.arm_c, k, stage.out / "teacher.npz", progress=True
+        )
+        print(
+            f"wrote {stage.out / 'teacher.npz'}: {len(data['p_train'])} training and"
+            f" {len(data['p_val'])} held-out programs; the teacher's held-out X_err"
+            f" {data['teacher_val_x_err_cm'].mean():.4f} cm"
+        )
+        return
 
     def write(params, history) -> None:
         """The best translators so far and the history (rewritten at every validation)."""

@@ -456,10 +456,38 @@ def rollout_program(
     else:
         data = mjx.make_data(warp_host_model, impl="warp")
     data = data.replace(qpos=rest_qpos.astype(dtype), qvel=rest_qvel.astype(dtype))
-    actuators = jnp.asarray(actuators)
-    timestep = mjx_model.opt.timestep
     p0 = jnp.full((3,), valve_params.p_min_bar, dtype)
     commands = valve.saturate(commands_bar, valve_params)
+    control_step = control_period(
+        mjx_model,
+        tip_site=tip_site,
+        actuators=actuators,
+        n_substeps=n_substeps,
+        valve_params=valve_params,
+        controls=controls,
+    )
+    _, (poses, ok) = jax.lax.scan(control_step, (data, p0, jnp.array(True)), commands)
+    return poses, ok
+
+
+def control_period(
+    mjx_model: mjx.Model,
+    *,
+    tip_site: int,
+    actuators: tuple[int, ...],
+    n_substeps: int,
+    valve_params: valve.ValveParams,
+    controls: stretch.ChamberControls | None = None,
+):
+    """One control period in pure JAX, as a `jax.lax.scan` body:
+    `step((data, pressure [3] bar, healthy), command [3] bar) -> ((data, pressure, healthy),
+    (pose [6], healthy))`, the command already saturated (`valve.saturate`).
+
+    `rollout_program` scans it from rest; `tracking.mpc_mjx` scans it from any state, to plan
+    from the middle of a program. The arguments are `rollout_program`'s.
+    """
+    actuators = jnp.asarray(actuators)
+    timestep = mjx_model.opt.timestep
 
     def physics_step(data, pressure):
         if controls is None:
@@ -477,8 +505,7 @@ def rollout_program(
         healthy = healthy & finite & (jnp.abs(data.qvel).max() < MAX_JOINT_SPEED)
         return (data, pressures[-1], healthy), (pose, healthy)
 
-    _, (poses, ok) = jax.lax.scan(control_step, (data, p0, jnp.array(True)), commands)
-    return poses, ok
+    return control_step
 
 
 def _raise_if_diverged(ok: np.ndarray) -> None:

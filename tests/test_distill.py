@@ -80,7 +80,7 @@ def test_distill_imitates_the_teacher_and_caches_it(arms, tmp_path):
     more = distill.teacher_data(
         dataclasses.replace(TINY, n_train=5, n_val=1), arm_s, arm_c, shipped.k, cache, logs.append
     )
-    assert logs[0].startswith("teacher: 1 new train programs of 1.0 s")
+    assert logs[0].startswith("teacher (c): 1 new train programs of 1.0 s")
     assert "read from" in logs[1] and more["p_val"].shape[0] == 1
     np.testing.assert_array_equal(more["c_train"][:4], data["c_train"])
     fresh = distill.teacher_data(
@@ -174,5 +174,47 @@ def test_teacher_cache_keeps_each_split_planned_before_a_stop(arms, tmp_path, mo
     monkeypatch.setattr(distill.mpc, "track", track)
     logs = []
     data = distill.teacher_data(config, arm_s, arm_c, k, cache, log=logs.append)
-    assert "read from" in logs[0] and logs[1].startswith("teacher: 1 new val programs")
+    assert "read from" in logs[0] and logs[1].startswith("teacher (c): 1 new val programs")
     assert data["p_train"].shape[0] == 2 and data["p_val"].shape[0] == 1
+
+
+def test_mjx_teacher_plans_in_shards_as_the_c_teacher(arms, tmp_path):
+    """The teacher on the accelerator (`tracking.mpc_mjx`), a shard of programs per call: its
+    cache has its own key, and its commands track as well as the C teacher's."""
+    arm_s, arm_c = arms
+    k = load_translator().k
+    one_step = dataclasses.replace(TINY, n_train=2, n_val=1, duration_s=0.5, iterations=1)
+    on_mjx = dataclasses.replace(one_step, teacher_backend="mjx", teacher_shard=1)
+    cache = tmp_path / "teacher.npz"
+    logs = []
+    data = distill.teacher_data(on_mjx, arm_s, arm_c, k, cache, log=logs.append)
+    assert [line.split(" s (")[0] + " s" for line in logs] == [
+        "teacher (mjx): 1 new train programs of 0.5 s",
+        "teacher (mjx): 1 new train programs of 0.5 s",
+        "teacher (mjx): 1 new val programs of 0.5 s",
+    ]
+    assert logs[1].endswith("2 of 2") and data["c_train"].shape == (2, 5, 3)
+    with np.load(cache) as f:
+        assert '"teacher_backend": "mjx"' in str(f["key"])
+    on_c = distill.teacher_data(one_step, arm_s, arm_c, k, tmp_path / "c.npz", log=logs.append)
+    np.testing.assert_array_equal(on_c["p_train"], data["p_train"])
+    np.testing.assert_allclose(
+        data["teacher_val_x_err_cm"], on_c["teacher_val_x_err_cm"], rtol=0.01
+    )
+
+
+def test_distill_config_refuses_a_teacher_it_cannot_run():
+    with pytest.raises(distill.ConfigError, match="teacher_backend"):
+        dataclasses.replace(TINY, teacher_backend="gpu")
+    with pytest.raises(distill.ConfigError, match="horizon_steps"):
+        dataclasses.replace(TINY, teacher_backend="mjx", horizon_steps=2)
+
+
+def test_distill_cli_teacher_only_plans_and_stops(tmp_path):
+    out = tmp_path / "run"
+    args = ["--translators", str(translator_path()), "--out", str(out), "--n-train", "2"]
+    args += ["--n-val", "1", "--duration-s", "0.3", "--batch-size", "2", "--teacher-only"]
+    distill.main(args)
+    assert (out / "teacher.npz").exists() and not (out / "translator.ckpt").exists()
+    with np.load(out / "teacher.npz") as f:
+        assert f["c_train"].shape == (2, 3, 3) and f["c_val"].shape == (1, 3, 3)

@@ -1,0 +1,61 @@
+#!/usr/bin/env bash
+# Runs ON THE GPU MACHINE (the device tool's `run`): the distillation over whole programs
+# (issue 30). Work accumulates in $TMP/issue30 while the machine is warm; every call returns all
+# of it but the teacher caches as $OUT/issue30.tar.gz (unpack into studies/results/<machine>/).
+#
+# Call sequence (one H100 or H200, timeout_s 600), back to back while the machine is warm:
+#   1. carry [".whl-extra1"]: bash studies/issue30_gpu.sh install
+#   2. carry [".whl-extra2"]: bash studies/issue30_gpu.sh bench [bench.teacher flags]
+#      the teacher in MuJoCo C on the host's cores beside MJX on the GPU (bench/results/<gpu>).
+#   3. bash studies/issue30_gpu.sh teacher K [ccgan.distill flags]
+#      the teacher's commands for the programs (ccgan.distill --teacher-only), cached in
+#      $TMP/issue30/distill_kK/teacher.npz; a call stopped at its deadline keeps whole shards.
+#   4. bash studies/issue30_gpu.sh distill K [ccgan.distill flags]
+#      G_c of the chain's ccgan_large (results/paper/run/ccgan_large) taught over the cached
+#      whole programs, held out on 60 s programs; the same flags as step 3 (the cache's key).
+#   5. bash studies/issue30_gpu.sh length K [studies.program_length flags]
+#      the distilled translators, their teacher and stretch only on held-out 60 s programs.
+set -uo pipefail
+source "$(dirname "${BASH_SOURCE[0]}")/../bench/device/install.sh" || exit 1
+[[ ${1:-} == install ]] && exit 0
+echo "$(nproc) cores; $(nvidia-smi -L 2>/dev/null | head -1)"
+MODEL=models/softarm.xml
+RUN=$TMP/issue30
+mkdir -p "$RUN"
+start=$SECONDS
+pack() {
+  tar -czf "$OUT/issue30.tar.gz" -C "$TMP" --exclude 'issue30/*/teacher.npz' issue30
+  echo "call: $((SECONDS - start)) s"
+  ls -la "$OUT"
+}
+left() { echo $((570 - (SECONDS - start))); }
+START=results/paper/run/ccgan_large
+case ${1:-} in
+bench)
+  shift
+  timeout "$(left)" $PY -m bench.teacher --model $MODEL --out "$RUN/teacher_bench" "$@"
+  pack
+  ;;
+teacher | distill)
+  mode=$1 k=$2
+  shift 2
+  extra=()
+  [[ $mode == teacher ]] && extra=(--teacher-only)
+  timeout "$(left)" $PY -m ccgan.distill --model $MODEL \
+    --translators $START/translator_seed{0,1,2}.ckpt --seeds 0 1 2 --hold-factor "$k" \
+    --teacher-backend mjx --horizon-steps 1 --iterations 1 --out "$RUN/distill_k$k" \
+    --max-wall-s $(($(left) - 60)) "${extra[@]}" "$@"
+  pack
+  ;;
+length)
+  k=$2
+  shift 2
+  timeout "$(left)" $PY -m studies.program_length --model $MODEL \
+    --translators "$RUN"/distill_k"$k"/translator_seed{0,1,2}.ckpt --out "$RUN/length_k$k" "$@"
+  pack
+  ;;
+*)
+  echo "usage: bash studies/issue30_gpu.sh install|bench|teacher|distill|length ..." >&2
+  exit 2
+  ;;
+esac

@@ -1,0 +1,211 @@
+"""Receding-horizon tracking in the MJX simulator: `tracking.mpc.track`'s one-step planner as one
+jitted program, batched over thousands of programs on the GPU.
+
+`tracking.mpc` plans in MuJoCo C, one source step at a time, on the host's cores. Its cost grows
+with the number of programs; that of this version barely does: every program's candidates of a
+step are one vmapped MJX rollout, and the source steps are a `jax.lax.scan`. Its wall time is
+set by the latency of the 2 x iterations sequential k-period rollouts per source step, so it
+pays where the programs are many (`bench.teacher` measures both on one host).
+
+The planner is `mpc`'s with `horizon_steps = 1`: damped Gauss-Newton on the residuals
+[100 (x_c - x_s), w (d3_c - d3_s)] of the pose after the held command, the Jacobian by forward
+differences (backward near the upper valve limit), commands that the cost pushes beyond a limit
+pinned there, and a line search over `mpc.LINE_STEPS` after clipping. One difference in the
+bookkeeping, none in the result: the state after the applied command is the chosen line-search
+candidate's end state (`mpc` rolls it out once more). MJX runs in float32, MuJoCo C in float64,
+so the two trackers' commands differ by the rounding that the Jacobian sees
+(tests/test_mpc_mjx.py bounds the difference of their tracking).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+
+import numpy as np
+
+from mjx_arm.arm import Arm, control_period
+from tracking.mpc import LINE_STEPS, MpcConfig, _batched
+
+#: Source steps per jitted call: each call's progress is shown, and the compile does not grow
+#: with the program's length.
+CHUNK_STEPS = 25
+
+
+def _planner(arm_c: Arm, k: int, cfg: MpcConfig):
+    """`advance(mjx_model, carry, x0 [S, n, 3], target [S, n, 6]) -> (carry, applied [S, n, 3],
+    cost [S, n], healthy [S])` over n source steps of S programs (jitted).
+
+    carry: (MJX data [S], valve pressure [S, 3] bar, healthy [S]); x0: where each step's plan
+    starts (bar); target: the pose to reach after each held step (m, unit d3).
+    """
+    import jax
+    import jax.numpy as jnp
+
+    lo, hi = arm_c.valve.p_min_bar, arm_c.valve.p_max_bar
+    w = cfg.orientation_weight_cm_per_rad
+    line = jnp.asarray(LINE_STEPS, jnp.float32)
+    eye = jnp.eye(3, dtype=jnp.float32)
+
+    def residuals(poses, target):
+        return jnp.concatenate(
+            [100.0 * (poses[..., :3] - target[:3]), w * (poses[..., 3:] - target[3:])], -1
+        )
+
+    def plan_one(mjx_model, carry, x0, target):
+        """One source step of one program: the new carry, the applied command, its cost."""
+        period = control_period(
+            mjx_model,
+            tip_site=arm_c.tip_site_id,
+            actuators=tuple(int(i) for i in arm_c.actuator_ids),
+            n_substeps=arm_c.n_substeps,
+            valve_params=arm_c.valve,
+            controls=arm_c.chamber_controls,
+        )
+
+        def hold(command):
+            """The end carry and pose of `command` held k periods from `carry`."""
+            end, (poses, _) = jax.lax.scan(lambda c, _: period(c, command), carry, None, length=k)
+            return end, poses[-1]
+
+        def fd_candidates(x):
+            """The plan and its forward-difference neighbours [4, 3], and their steps [3]."""
+            fd = jnp.where(x + cfg.fd_step_bar > hi, -cfg.fd_step_bar, cfg.fd_step_bar)
+            return x[None] + jnp.concatenate([jnp.zeros((1, 3), x.dtype), jnp.diag(fd)]), fd
+
+        def line_candidates(x, fd, r):
+            """The damped Gauss-Newton step's line-search candidates [4, 3] from the residuals
+            r [4, 6] of `fd_candidates(x)`."""
+            jac = (r[1:] - r[:1]) / fd[:, None]  # [3, 6]
+            slope = jac @ r[0]
+            pinned = ((x <= lo + 1e-6) & (slope > 0)) | ((x >= hi - 1e-6) & (slope < 0))
+            jac = jnp.where(pinned[:, None], 0.0, jac)
+            hess = jac @ jac.T
+            scale = jnp.trace(hess) / 3.0
+            delta = -jnp.linalg.solve(hess + (cfg.damping * scale + 1e-12) * eye, jac @ r[0])
+            delta = jnp.where(pinned, 0.0, delta)
+            return jnp.clip(x[None] + line[:, None] * delta[None], lo, hi)
+
+        def phase(state, is_line):
+            """One batch of 4 held rollouts: the Jacobian's (is_line False) or the line
+            search's (True). Written as one scan body, so that the rollout compiles once."""
+            x, trial, best_end, best_cost = state
+            fd_cand, fd = fd_candidates(x)
+            cand = jnp.where(is_line, trial, fd_cand)
+            ends, poses = jax.vmap(hold)(cand)
+            r = residuals(poses, target)
+            cost = (r**2).sum(-1)
+            best = jnp.argmin(cost)
+            x = jnp.where(is_line, cand[best], x)
+            trial = jnp.where(is_line, trial, line_candidates(x, fd, r))
+            best_end = jax.tree.map(
+                lambda old, new: jnp.where(is_line, new[best], old), best_end, ends
+            )
+            best_cost = jnp.where(is_line, cost[best], best_cost)
+            return (x, trial, best_end, best_cost), None
+
+        phases = jnp.tile(jnp.array([False, True]), cfg.iterations)
+        start = (x0, jnp.zeros((4, 3), x0.dtype), carry, jnp.zeros((), x0.dtype))
+        (x, _, new_carry, cost), _ = jax.lax.scan(phase, start, phases)
+        return new_carry, x, cost
+
+    def advance(mjx_model, carry, x0, target):
+        def step(carry, inputs):
+            x0_n, target_n = inputs
+            carry, applied, cost = jax.vmap(plan_one, in_axes=(None, 0, 0, 0))(
+                mjx_model, carry, x0_n, target_n
+            )
+            return carry, (applied, cost)
+
+        inputs = (jnp.swapaxes(x0, 0, 1), jnp.swapaxes(target, 0, 1))
+        carry, (applied, cost) = jax.lax.scan(step, carry, inputs)
+        return carry, jnp.swapaxes(applied, 0, 1), jnp.swapaxes(cost, 0, 1), carry[2]
+
+    return jax.jit(advance)
+
+
+def _rest_carry(arm_c: Arm, n_prog: int):
+    """(MJX data, pressure, healthy) at rest for n_prog programs (float32)."""
+    import jax
+    import jax.numpy as jnp
+    from mujoco import mjx
+
+    data = mjx.make_data(arm_c.mjx_model)
+    data = data.replace(
+        qpos=jnp.asarray(arm_c.rest_qpos, jnp.float32),
+        qvel=jnp.asarray(arm_c.rest_qvel, jnp.float32),
+    )
+    data = jax.tree.map(lambda leaf: jnp.broadcast_to(leaf, (n_prog,) + leaf.shape), data)
+    pressure = jnp.full((n_prog, 3), arm_c.valve.p_min_bar, jnp.float32)
+    return data, pressure, jnp.ones(n_prog, bool)
+
+
+def track(
+    arm_c: Arm,
+    target_poses: np.ndarray,
+    k: int,
+    init_program: np.ndarray,
+    cfg: MpcConfig = MpcConfig(),
+    progress: bool = False,
+    chunk_steps: int = CHUNK_STEPS,
+) -> tuple[np.ndarray, dict]:
+    """D_c commands that track target poses, planned in MJX (`tracking.mpc.track`'s API).
+
+    Args:
+      arm_c: the D_c arm.
+      target_poses: [T, 6] or [S, T, 6] target poses (m, unit d3), one per source step.
+      k: control periods each command is held.
+      init_program: [T, 3] or [S, T, 3] commands (bar) each step's plan starts from.
+      cfg: the tracker's settings; `horizon_steps` must be 1.
+      progress: show a progress bar over source steps.
+      chunk_steps: source steps per jitted call.
+
+    Returns:
+      (commands [T * k, 3] or [S, T * k, 3] (bar), each held k periods; info: "cost" [T] or
+      [S, T] (squared residual of the applied step), "wall_s", "first_chunk_s" (the compile and
+      the first chunk), "healthy" [S] (no program's simulation diverged)).
+
+    Raises:
+      ValueError: `mpc.track`'s, a horizon other than 1, or chunk_steps < 1.
+    """
+    import jax.numpy as jnp
+
+    single, targets, init = _batched(target_poses, init_program, k, cfg)
+    if cfg.horizon_steps != 1:
+        raise ValueError(f"the MJX tracker plans one step at a time, got {cfg.horizon_steps=}")
+    if chunk_steps < 1:
+        raise ValueError(f"chunk_steps must be >= 1, got {chunk_steps}")
+    n_prog, n_steps, _ = targets.shape
+    init = np.clip(init, arm_c.valve.p_min_bar, arm_c.valve.p_max_bar)
+    t0 = time.perf_counter()
+    advance = _planner(arm_c, k, dataclasses.replace(cfg))
+    carry = _rest_carry(arm_c, n_prog)
+    n_chunks = -(-n_steps // chunk_steps)
+    pad = n_chunks * chunk_steps - n_steps  # the last chunk is padded with its last step
+    init_p = np.concatenate([init, np.repeat(init[:, -1:], pad, 1)], 1).astype(np.float32)
+    target_p = np.concatenate([targets, np.repeat(targets[:, -1:], pad, 1)], 1).astype(np.float32)
+    applied, cost = [], []
+    chunks = range(n_chunks)
+    if progress:
+        from tqdm import tqdm
+
+        chunks = tqdm(chunks, desc="mpc (mjx)", unit=f"x{chunk_steps} steps")
+    for c in chunks:
+        part = slice(c * chunk_steps, (c + 1) * chunk_steps)
+        carry, applied_c, cost_c, healthy = advance(
+            arm_c.mjx_model, carry, jnp.asarray(init_p[:, part]), jnp.asarray(target_p[:, part])
+        )
+        applied.append(np.asarray(applied_c, np.float64))
+        cost.append(np.asarray(cost_c, np.float64))
+        if c == 0:
+            first_chunk_s = time.perf_counter() - t0
+    applied = np.concatenate(applied, 1)[:, :n_steps]
+    cost = np.concatenate(cost, 1)[:, :n_steps]
+    commands = np.repeat(applied, k, axis=1)
+    info = {
+        "cost": cost[0] if single else cost,
+        "wall_s": time.perf_counter() - t0,
+        "first_chunk_s": first_chunk_s,
+        "healthy": np.asarray(healthy),
+    }
+    return (commands[0] if single else commands), info
