@@ -104,8 +104,9 @@ class DistillConfig:
     or "mjx" (`tracking.mpc_mjx`, every program at once on the accelerator, horizon 1); its
     commands are scored in MuJoCo C either way. `bench.teacher` measures which is faster."""
     teacher_shard: int = 0
-    """Programs the teacher plans per call, the cache written after each (0: a split at once),
-    so that a run stopped at a deadline keeps the shards it finished."""
+    """Programs the teacher plans per call, across splits, the cache written after each (0: a
+    split per call), so that a run stopped at a deadline keeps the shards it finished; with
+    the MJX teacher one call's wall time barely grows with its programs."""
     hold_factor: int = 0
     """k, the control periods each command is held, for the teacher and the distilled
     translators (0: the translators' own, which must agree). G_c gives one command per source
@@ -164,6 +165,23 @@ class DistillConfig:
         return key
 
 
+def _next_shard(pending: list, size: int) -> list:
+    """Takes the next shard off `pending` [(split, programs [N, T, 3])]: `size` programs,
+    across splits in order (0: the first split's whole rest, one split per shard)."""
+    if size == 0:
+        return [pending.pop(0)]
+    shard = []
+    while pending and size > 0:
+        split, programs = pending[0]
+        shard.append((split, programs[:size]))
+        if len(programs) <= size:
+            pending.pop(0)
+        else:
+            pending[0] = (split, programs[size:])
+        size -= len(shard[-1][1])
+    return shard
+
+
 def teacher_data(
     config: DistillConfig, arm_s, arm_c, k: int, cache: Path | None, log=print, progress=False
 ):
@@ -199,32 +217,42 @@ def teacher_data(
             log(f"{cache} is unreadable ({err}); recomputing")
     mpc_cfg = mpc.MpcConfig(horizon_steps=config.horizon_steps, iterations=config.iterations)
     track = mpc_mjx.track if config.teacher_backend == "mjx" else mpc.track
+    pending = []  # (split, its programs not planned yet), in the splits' order
     for split, n, full_scale in splits:
+        have = len(store.get(f"p_{split}", ()))
         if n == 0:
             continue
-        if len(store.get(f"p_{split}", ())) >= n:
+        if have >= n:
             log(f"teacher: {n} {split} programs read from {cache}")
             continue
-        all_programs = shape_like_programs(
+        programs = shape_like_programs(
             n, config.duration_s, seed=config.seed, split=f"distill/{split}", full_scale=full_scale
         )
-        while (have := len(store.get(f"p_{split}", ()))) < n:
-            t0 = time.perf_counter()
-            programs = all_programs[have : have + (config.teacher_shard or n)]
-            targets = arm_s.rollout(programs, backend="c")
-            commands, _ = track(arm_c, targets, k, programs, mpc_cfg, progress=progress)
-            new = {"p": programs, "x": targets, "c": commands[:, k - 1 :: k]}
+        pending.append((split, programs[have:]))
+    total, planned = sum(len(programs) for _, programs in pending), 0
+    while pending:
+        shard = _next_shard(pending, config.teacher_shard)
+        t0 = time.perf_counter()
+        programs = np.concatenate([piece for _, piece in shard])
+        targets = arm_s.rollout(programs, backend="c")
+        commands, _ = track(arm_c, targets, k, programs, mpc_cfg, progress=progress)
+        new = {"p": programs, "x": targets, "c": commands[:, k - 1 :: k]}
+        first = 0
+        for split, piece in shard:
             for name, value in new.items():
+                value = value[first : first + len(piece)].astype(np.float32)
                 old = store.get(f"{name}_{split}", np.zeros((0,) + value.shape[1:], np.float32))
-                store[f"{name}_{split}"] = np.concatenate([old, value.astype(np.float32)])
-            wall_s = time.perf_counter() - t0
-            log(
-                f"teacher ({config.teacher_backend}): {len(programs)} new {split} programs of"
-                f" {config.duration_s} s ({wall_s:.0f} s), {have + len(programs)} of {n}"
-            )
-            if cache is not None:  # kept after each shard: a run stopped later plans the rest
-                cache.parent.mkdir(parents=True, exist_ok=True)
-                write_atomically(cache, lambda f: np.savez_compressed(f, key=key, **store))
+                store[f"{name}_{split}"] = np.concatenate([old, value])
+            first += len(piece)
+        planned += len(programs)
+        what = " + ".join(f"{len(piece)} new {split} programs" for split, piece in shard)
+        log(
+            f"teacher ({config.teacher_backend}): {what} of {config.duration_s} s"
+            f" ({time.perf_counter() - t0:.0f} s), {planned} of {total}"
+        )
+        if cache is not None:  # kept after each shard: a run stopped later plans the rest
+            cache.parent.mkdir(parents=True, exist_ok=True)
+            write_atomically(cache, lambda f: np.savez_compressed(f, key=key, **store))
     data = {}
     for part in ("p", "x", "c"):
         for joined in ("train", "val"):

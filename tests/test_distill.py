@@ -80,8 +80,8 @@ def test_distill_imitates_the_teacher_and_caches_it(arms, tmp_path):
     more = distill.teacher_data(
         dataclasses.replace(TINY, n_train=5, n_val=1), arm_s, arm_c, shipped.k, cache, logs.append
     )
-    assert logs[0].startswith("teacher (c): 1 new train programs of 1.0 s")
-    assert "read from" in logs[1] and more["p_val"].shape[0] == 1
+    assert "read from" in logs[0] and more["p_val"].shape[0] == 1
+    assert logs[1].startswith("teacher (c): 1 new train programs of 1.0 s")
     np.testing.assert_array_equal(more["c_train"][:4], data["c_train"])
     fresh = distill.teacher_data(
         dataclasses.replace(TINY, n_train=5, n_val=1), arm_s, arm_c, shipped.k, None, logs.append
@@ -193,7 +193,18 @@ def test_mjx_teacher_plans_in_shards_as_the_c_teacher(arms, tmp_path):
         "teacher (mjx): 1 new train programs of 0.5 s",
         "teacher (mjx): 1 new val programs of 0.5 s",
     ]
-    assert logs[1].endswith("2 of 2") and data["c_train"].shape == (2, 5, 3)
+    assert logs[1].endswith("2 of 3") and data["c_train"].shape == (2, 5, 3)
+    # A shard of 2 spans the splits: the training split's second program and the held-out one.
+    cache_2 = tmp_path / "teacher_2.npz"
+    first = dataclasses.replace(on_mjx, n_train=1, n_val=0, n_val_full=1, batch_size=1)
+    distill.teacher_data(first, arm_s, arm_c, k, cache_2, log=len)
+    logs.clear()
+    twos = dataclasses.replace(first, n_train=2, n_val=1, teacher_shard=2)
+    again = distill.teacher_data(twos, arm_s, arm_c, k, cache_2, log=logs.append)
+    assert logs[-1].startswith("teacher (mjx): 1 new train programs + 1 new val programs of 0.5 s")
+    assert logs[-1].endswith("2 of 2")
+    np.testing.assert_allclose(again["c_train"], data["c_train"], atol=0.01)  # float32, batch
+    np.testing.assert_allclose(again["c_val"][:1], data["c_val"], atol=0.01)
     with np.load(cache) as f:
         assert '"teacher_backend": "mjx"' in str(f["key"])
     on_c = distill.teacher_data(one_step, arm_s, arm_c, k, tmp_path / "c.npz", log=logs.append)
