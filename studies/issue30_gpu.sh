@@ -11,7 +11,7 @@
 #      the teacher's commands for the programs (ccgan.distill --teacher-only), cached in
 #      $TMP/issue30/distill_kK/teacher.npz; a call stopped at its deadline keeps whole shards.
 #   4. bash studies/issue30_gpu.sh distill K [ccgan.distill flags]
-#      G_c of the chain's ccgan_large (results/paper/run/ccgan_large) taught over the cached
+#      G_c of the chain's CCGAN-GP on this arm (studies/results/h200/issue29/chain/ccgan) taught over the cached
 #      whole programs, held out on 60 s programs; the same flags as step 3 (the cache's key).
 #   5. bash studies/issue30_gpu.sh length K [studies.program_length flags]
 #      the distilled translators, their teacher and stretch only on held-out 60 s programs.
@@ -29,7 +29,7 @@ pack() {
   ls -la "$OUT"
 }
 left() { echo $((570 - (SECONDS - start))); }
-START=results/paper/run/ccgan_large
+START=studies/results/h200/issue29/chain/ccgan
 case ${1:-} in
 bench)
   shift
