@@ -60,6 +60,9 @@ def main(argv=None) -> None:
     p.add_argument(
         "--horizon-steps", type=int, default=3, help="the teacher's horizon in the distillation"
     )
+    p.add_argument(
+        "--iterations", type=int, default=2, help="the teacher's Gauss-Newton iterations per step"
+    )
     p.add_argument("--out", required=True, help="output prefix (writes .json, .md and .png)")
     a = p.parse_args(argv)
     window = int(round(a.window_s * STEPS_PER_S))
@@ -79,7 +82,7 @@ def main(argv=None) -> None:
         commands[f"translator seed {seed}"] = np.stack(
             [tr.translate(prog, target)[0] for prog, target in zip(programs, targets, strict=True)]
         )
-    cfg = mpc.MpcConfig(horizon_steps=a.horizon_steps)
+    cfg = mpc.MpcConfig(horizon_steps=a.horizon_steps, iterations=a.iterations)
     commands["teacher (mpc)"], info = mpc.track(arm_c, targets, k, programs, cfg, progress=True)
     x_err = {
         name: metrics.position_error_cm(held.run_dc(arm_c, cmd, k, "c"), targets)
@@ -98,7 +101,11 @@ def main(argv=None) -> None:
         "n": a.n,
         "duration_s": a.duration,
         "window_s": a.window_s,
-        "teacher": {"horizon_steps": a.horizon_steps, "wall_s": info.get("wall_s")},
+        "teacher": {
+            "horizon_steps": a.horizon_steps,
+            "iterations": a.iterations,
+            "wall_s": info.get("wall_s"),
+        },
         "tip_excursion_cm": excursion,
         "x_err_cm": errors,
         "x_err_cm_per_program": {name: err.mean(-1).tolist() for name, err in x_err.items()},
@@ -106,7 +113,8 @@ def main(argv=None) -> None:
     body = [
         f"- {a.n} held-out shape-like programs of {a.duration:g} s (split length_study, full"
         f" scale); tip excursion of the targets {np.mean(excursion):.2f} cm (mean); k = {k};"
-        f" teacher: receding-horizon tracking over {a.horizon_steps} source steps",
+        f" teacher: receding-horizon tracking over {a.horizon_steps} source step(s),"
+        f" {a.iterations} Gauss-Newton iteration(s) per step (MuJoCo C)",
         "",
         f"X_err (cm) in the D_c simulator (MuJoCo C), mean over programs and time: over the first"
         f" {a.window_s:g} s (the length distilled on), after it, and over the whole program;"
