@@ -184,14 +184,25 @@ class Arm:
         """
         return functools.partial(
             rollout_program,
-            tip_site=self.tip_site_id,
-            actuators=tuple(int(i) for i in self.actuator_ids),
-            n_substeps=self.n_substeps,
-            valve_params=self.valve,
-            controls=self.chamber_controls,
             rest_qpos=jnp.asarray(self.rest_qpos),
             rest_qvel=jnp.asarray(self.rest_qvel),
+            **self.period_kwargs(),
         )
+
+    def period_fn(self, mjx_model: mjx.Model):
+        """`control_period` bound to this arm: one control period of `mjx_model` (this arm's,
+        or a traced copy inside a jitted function) from any state."""
+        return control_period(mjx_model, **self.period_kwargs())
+
+    def period_kwargs(self) -> dict:
+        """The keyword arguments `control_period` and `rollout_program` take from this arm."""
+        return {
+            "tip_site": self.tip_site_id,
+            "actuators": tuple(int(i) for i in self.actuator_ids),
+            "n_substeps": self.n_substeps,
+            "valve_params": self.valve,
+            "controls": self.chamber_controls,
+        }
 
     @functools.cached_property
     def _jit_batched(self):

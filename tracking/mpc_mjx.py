@@ -24,7 +24,7 @@ import time
 
 import numpy as np
 
-from mjx_arm.arm import Arm, control_period
+from mjx_arm.arm import Arm
 from tracking.mpc import LINE_STEPS, MpcConfig, _batched
 
 #: Source steps per jitted call: each call's progress is shown, and the compile does not grow
@@ -54,14 +54,7 @@ def _planner(arm_c: Arm, k: int, cfg: MpcConfig):
 
     def plan_one(mjx_model, carry, x0, target):
         """One source step of one program: the new carry, the applied command, its cost."""
-        period = control_period(
-            mjx_model,
-            tip_site=arm_c.tip_site_id,
-            actuators=tuple(int(i) for i in arm_c.actuator_ids),
-            n_substeps=arm_c.n_substeps,
-            valve_params=arm_c.valve,
-            controls=arm_c.chamber_controls,
-        )
+        period = arm_c.period_fn(mjx_model)
 
         def hold(command):
             """The end carry and pose of `command` held k periods from `carry`."""
