@@ -19,7 +19,6 @@ so the two trackers' commands differ by the rounding that the Jacobian sees
 
 from __future__ import annotations
 
-import dataclasses
 import time
 
 import numpy as np
@@ -171,7 +170,7 @@ def track(
     n_prog, n_steps, _ = targets.shape
     init = np.clip(init, arm_c.valve.p_min_bar, arm_c.valve.p_max_bar)
     t0 = time.perf_counter()
-    advance = _planner(arm_c, k, dataclasses.replace(cfg))
+    advance = _planner(arm_c, k, cfg)
     carry = _rest_carry(arm_c, n_prog)
     n_chunks = -(-n_steps // chunk_steps)
     pad = n_chunks * chunk_steps - n_steps  # the last chunk is padded with its last step
