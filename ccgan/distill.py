@@ -36,6 +36,9 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import json
+import signal
+import sys
+import threading
 import time
 from pathlib import Path
 from typing import Any, NamedTuple
@@ -183,13 +186,24 @@ def _next_shard(pending: list, size: int) -> list:
 
 
 def teacher_data(
-    config: DistillConfig, arm_s, arm_c, k: int, cache: Path | None, log=print, progress=False
+    config: DistillConfig,
+    arm_s,
+    arm_c,
+    k: int,
+    cache: Path | None,
+    log=print,
+    progress=False,
+    should_stop=None,
 ):
     """Programs, D_s targets and teacher commands of the train and val splits.
 
     Program i of a split is the same whatever the split's size (`shape_like_programs`), and the
     teacher plans each program on its own, so the cache grows: a run asking for more programs
     than it holds computes only the missing ones; one asking for fewer reads a prefix.
+
+    With the MJX teacher, `should_stop()` (checked between chunks of source steps) stops a
+    shard part-way: its simulator states go to `teacher_partial.npz` beside the cache, and the
+    next run goes on from there (`tracking.mpc_mjx.TrackingStopped` is raised).
 
     Returns:
       dict of float32 arrays, each split followed by its full-amplitude part ("train" has
@@ -216,7 +230,10 @@ def teacher_data(
         except (OSError, ValueError, KeyError) as err:
             log(f"{cache} is unreadable ({err}); recomputing")
     mpc_cfg = mpc.MpcConfig(horizon_steps=config.horizon_steps, iterations=config.iterations)
-    track = mpc_mjx.track if config.teacher_backend == "mjx" else mpc.track
+    track, resumable = mpc.track, {}
+    if config.teacher_backend == "mjx":
+        partial = None if cache is None else cache.with_name(cache.stem + "_partial.npz")
+        track, resumable = mpc_mjx.track, {"resume": partial, "should_stop": should_stop}
     pending = []  # (split, its programs not planned yet), in the splits' order
     for split, n, full_scale in splits:
         have = len(store.get(f"p_{split}", ()))
@@ -235,7 +252,7 @@ def teacher_data(
         t0 = time.perf_counter()
         programs = np.concatenate([piece for _, piece in shard])
         targets = arm_s.rollout(programs, backend="c")
-        commands, _ = track(arm_c, targets, k, programs, mpc_cfg, progress=progress)
+        commands, _ = track(arm_c, targets, k, programs, mpc_cfg, progress=progress, **resumable)
         new = {"p": programs, "x": targets, "c": commands[:, k - 1 :: k]}
         first = 0
         for split, piece in shard:
@@ -295,11 +312,12 @@ def imitation_data(
     cache: Path | None,
     log=print,
     progress=False,
+    should_stop=None,
 ) -> ImitationData:
     """`teacher_data` (computed, or read from `cache`), normalised with the translator's bounds."""
     import jax.numpy as jnp
 
-    data = teacher_data(config, arm_s, arm_c, k, cache, log, progress)
+    data = teacher_data(config, arm_s, arm_c, k, cache, log, progress, should_stop)
     bounds = translator.bounds
     return ImitationData(
         s_train=jnp.asarray(samples(data["p_train"], data["x_train"], bounds)),
@@ -436,6 +454,7 @@ def distill(
     progress: bool = True,
     log=print,
     on_validation=None,
+    stop: threading.Event | None = None,
 ) -> tuple[list[dict], dict]:
     """Trains each translator's G_c to reproduce the teacher's commands.
 
@@ -448,6 +467,8 @@ def distill(
       on_validation: optional callable(best parameters per translator, history), called after
         every validation but the first with the best iterates so far (e.g. to write them, so
         that a killed run keeps its progress); the history then has "complete": False.
+      stop: once set (e.g. by SIGTERM), the teacher stops after its chunk of source steps
+        (`TrackingStopped`) or training after its epoch, as at `config.max_wall_s`.
 
     Returns:
       (best G_c parameters per translator, history: "train_loss" [epochs, S] (weighted mean
@@ -458,7 +479,14 @@ def distill(
     k = config.hold_factor or common_k(translators)
     n_train = config.n_train + config.n_train_full  # >= batch_size (DistillConfig checks)
     t0 = time.perf_counter()
-    data = imitation_data(config, translators[0], arm_s, arm_c, k, cache, log, progress)
+
+    def should_stop() -> bool:
+        late = config.max_wall_s > 0 and time.perf_counter() - t0 > config.max_wall_s
+        return late or (stop is not None and stop.is_set())
+
+    data = imitation_data(
+        config, translators[0], arm_s, arm_c, k, cache, log, progress, should_stop
+    )
     step, stacked, opt_state = init_imitation(translators, config, data)
     validate = make_validation(translators[0], arm_c, k, data)
     history = _new_history(arm_c, k, data)
@@ -502,8 +530,9 @@ def distill(
         unit="epoch",
         progress=progress,
         log=log,
+        stop=stop,
     )
-    history["complete"] = True
+    history["complete"] = stop is None or not stop.is_set()
     return _best_of_seeds(best, history, t0), history
 
 
@@ -533,11 +562,37 @@ def main(argv=None) -> None:
         except ValueError as err:
             p.error(f"{err}: give --hold-factor")
 
+    # SIGTERM (a time limit, experiments.stages at its deadline) stops the teacher after its
+    # chunk of source steps (its progress kept) or training after its epoch (its best iterates
+    # written); exit status 143 says the run is unfinished: rerun the same command to go on.
+    stop = threading.Event()
+    previous = signal.signal(signal.SIGTERM, lambda *_: stop.set())
+    try:
+        _run(a, config, stage, stop)
+    except mpc_mjx.TrackingStopped as err:
+        print(f"teacher: {err}: rerun the same command to go on", file=sys.stderr)
+        sys.exit(128 + signal.SIGTERM)
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+    if stop.is_set():
+        print("stopped by SIGTERM: rerun the same command to go on", file=sys.stderr)
+        sys.exit(128 + signal.SIGTERM)
+
+
+def _run(a: argparse.Namespace, config: DistillConfig, stage, stop: threading.Event) -> None:
+    """`main`'s work: the teacher only, or the whole distillation."""
     if a.teacher_only:
         k = config.hold_factor or common_k(stage.translators)
+        t0 = time.perf_counter()
+
+        def should_stop() -> bool:
+            late = config.max_wall_s > 0 and time.perf_counter() - t0 > config.max_wall_s
+            return late or stop.is_set()
+
         data = teacher_data(
-            config, stage.arm_s, stage.arm_c, k, stage.out / "teacher.npz", progress=True
-        )
+            config, stage.arm_s, stage.arm_c, k, stage.out / "teacher.npz", progress=True,
+            should_stop=should_stop,
+        )  # fmt: skip
         print(
             f"wrote {stage.out / 'teacher.npz'}: {len(data['p_train'])} training and"
             f" {len(data['p_val'])} held-out programs; the teacher's held-out X_err"
@@ -565,6 +620,7 @@ def main(argv=None) -> None:
         config,
         cache=stage.out / "teacher.npz",
         on_validation=write,
+        stop=stop,
     )
     write(params, history)
     print(

@@ -118,6 +118,7 @@ def validated_loop(
     unit: str,
     progress: bool = True,
     log=print,
+    stop=None,
 ) -> BestIterates:
     """The loop of a fine-tune stage: n steps (or epochs) of training, validated now and then.
 
@@ -127,7 +128,7 @@ def validated_loop(
     iterate and calls `report(best)` (unless None; e.g. to write the best iterates, so that a
     killed run keeps its progress). It stops early, keeping the best iterates so far, at a
     non-finite loss or once `config.max_wall_s` seconds (0: no limit) have passed since `t0`
-    (`time.perf_counter()`).
+    (`time.perf_counter()`), or once `stop` (a `threading.Event`, e.g. set by SIGTERM) is set.
 
     Args:
       params, opt_state: the members' parameters [M, ...] and optimiser state to start from.
@@ -147,14 +148,16 @@ def validated_loop(
             log(f"{unit} {i}: non-finite loss {loss}; stopping, keeping the best iterate")
             break
         out_of_time = config.max_wall_s > 0 and time.perf_counter() - t0 > config.max_wall_s
-        if i % config.eval_every == 0 or i == n or out_of_time:
+        stopped = stop is not None and stop.is_set()
+        if i % config.eval_every == 0 or i == n or out_of_time or stopped:
             score = validate(i, params)
             best = best.update(i, params, score)
             bar.set_postfix(loss=float(loss.mean()), val_cm=float(score.mean()))
             if report is not None:
                 report(best)
-        if out_of_time:
-            log(f"stopping after {unit} {i}: max_wall_s = {config.max_wall_s} s reached")
+        if out_of_time or stopped:
+            why = f"max_wall_s = {config.max_wall_s} s reached" if out_of_time else "asked to stop"
+            log(f"stopping after {unit} {i}: {why}")
             break
     bar.close()
     return best

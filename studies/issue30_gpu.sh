@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # Runs ON THE GPU MACHINE (the device tool's `run`): the distillation over whole programs
 # (issue 30). Work accumulates in $TMP/issue30 while the machine is warm; every call returns all
-# of it but the teacher caches as $OUT/issue30.tar.gz (unpack into studies/results/<machine>/).
+# of it but the teacher caches (teacher*.npz) as $OUT/issue30.tar.gz (unpack into studies/results/<machine>/).
 #
 # Call sequence (one H100 or H200, timeout_s 600), back to back while the machine is warm:
 #   1. carry [".whl-extra1"]: bash studies/issue30_gpu.sh install
@@ -9,10 +9,16 @@
 #      the teacher in MuJoCo C on the host's cores beside MJX on the GPU (bench/results/<gpu>).
 #   3. bash studies/issue30_gpu.sh teacher K [ccgan.distill flags]
 #      the teacher's commands for the programs (ccgan.distill --teacher-only), cached in
-#      $TMP/issue30/distill_kK/teacher.npz; a call stopped at its deadline keeps whole shards.
+#      $TMP/issue30/distill_kK/teacher.npz; a call stopped at its deadline (exit status 143)
+#      keeps its finished shards and the simulator states of the one in progress
+#      (teacher_partial.npz): the same call again goes on from there.
 #   4. bash studies/issue30_gpu.sh distill K [ccgan.distill flags]
 #      G_c of the chain's CCGAN-GP on this arm (studies/results/h200/issue29/chain/ccgan) taught over the cached
 #      whole programs, held out on 60 s programs; the same flags as step 3 (the cache's key).
+#   4b. bash studies/issue30_gpu.sh rerun K [the same flags]
+#      a second distillation on a copy of the same teacher cache (distill_kK_run2): run to run.
+#   SUFFIX=_fresh before steps 3 and 4 plans and distills in distill_kK_fresh instead: a second
+#   run from an empty folder, the teacher replanned.
 #   5. bash studies/issue30_gpu.sh length K [studies.program_length flags]
 #      the distilled translators, their teacher and stretch only on held-out 60 s programs.
 set -uo pipefail
@@ -24,27 +30,45 @@ RUN=$TMP/issue30
 mkdir -p "$RUN"
 start=$SECONDS
 pack() {
-  tar -czf "$OUT/issue30.tar.gz" -C "$TMP" --exclude 'issue30/*/teacher.npz' issue30
+  tar -czf "$OUT/issue30.tar.gz" -C "$TMP" --exclude 'issue30/*/teacher*.npz' issue30
   echo "call: $((SECONDS - start)) s"
   ls -la "$OUT"
 }
 left() { echo $((570 - (SECONDS - start))); }
 START=studies/results/h200/issue29/chain/ccgan
+distill() { # distill() OUT_DIR K [--teacher-only] [ccgan.distill flags]
+  local out=$1 k=$2
+  shift 2
+  timeout "$(left)" $PY -m ccgan.distill --model $MODEL \
+    --translators $START/translator_seed{0,1,2}.ckpt --seeds 0 1 2 --hold-factor "$k" \
+    --teacher-backend mjx --horizon-steps 1 --iterations 1 --out "$out" \
+    --max-wall-s $(($(left) - 60)) "$@"
+  echo "ccgan.distill exit status $? (143: stopped at --max-wall-s; the same call again goes on)"
+}
 case ${1:-} in
 bench)
   shift
   timeout "$(left)" $PY -m bench.teacher --model $MODEL --out "$RUN/teacher_bench" "$@"
   pack
   ;;
-teacher | distill)
-  mode=$1 k=$2
+teacher)
+  k=$2
   shift 2
-  extra=()
-  [[ $mode == teacher ]] && extra=(--teacher-only)
-  timeout "$(left)" $PY -m ccgan.distill --model $MODEL \
-    --translators $START/translator_seed{0,1,2}.ckpt --seeds 0 1 2 --hold-factor "$k" \
-    --teacher-backend mjx --horizon-steps 1 --iterations 1 --out "$RUN/distill_k$k" \
-    --max-wall-s $(($(left) - 60)) "${extra[@]}" "$@"
+  distill "$RUN/distill_k$k${SUFFIX:-}" "$k" --teacher-only "$@"
+  pack
+  ;;
+distill)
+  k=$2
+  shift 2
+  distill "$RUN/distill_k$k${SUFFIX:-}" "$k" "$@"
+  pack
+  ;;
+rerun)
+  k=$2
+  shift 2
+  mkdir -p "$RUN/distill_k${k}_run2"
+  cp --update=none "$RUN/distill_k$k/teacher.npz" "$RUN/distill_k${k}_run2/" || exit 1
+  distill "$RUN/distill_k${k}_run2" "$k" "$@"
   pack
   ;;
 length)
@@ -55,7 +79,7 @@ length)
   pack
   ;;
 *)
-  echo "usage: bash studies/issue30_gpu.sh install|bench|teacher|distill|length ..." >&2
+  echo "usage: bash studies/issue30_gpu.sh install|bench|teacher|distill|rerun|length ..." >&2
   exit 2
   ;;
 esac

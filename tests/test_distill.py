@@ -229,3 +229,23 @@ def test_distill_cli_teacher_only_plans_and_stops(tmp_path):
     assert (out / "teacher.npz").exists() and not (out / "translator.ckpt").exists()
     with np.load(out / "teacher.npz") as f:
         assert f["c_train"].shape == (2, 3, 3) and f["c_val"].shape == (1, 3, 3)
+
+
+def test_distill_cli_stopped_teacher_keeps_its_progress_and_says_rerun(tmp_path, monkeypatch):
+    """The MJX teacher past --max-wall-s stops part-way through a shard, into
+    teacher_partial.npz beside the cache, and the CLI exits 143 (rerun to go on)."""
+    seen = []
+
+    def stopped(arm_c, targets, k, programs, cfg, progress, resume, should_stop):
+        seen.append((resume, should_stop()))
+        raise distill.mpc_mjx.TrackingStopped(3, targets.shape[1], resume)
+
+    monkeypatch.setattr(distill.mpc_mjx, "track", stopped)
+    out = tmp_path / "run"
+    args = ["--translators", str(translator_path()), "--out", str(out), "--n-train", "2"]
+    args += ["--n-val", "1", "--duration-s", "0.5", "--batch-size", "2", "--teacher-only"]
+    args += ["--teacher-backend", "mjx", "--iterations", "1", "--max-wall-s", "1e-6"]
+    with pytest.raises(SystemExit) as stop:
+        distill.main(args)
+    assert stop.value.code == 143
+    assert seen == [(out / "teacher_partial.npz", True)]

@@ -54,3 +54,31 @@ def test_mjx_tracker_refuses_what_it_cannot_plan(arms):
         mpc_mjx.track(arm_c, np.zeros((5, 6)), 2, np.zeros((4, 3)))
     with pytest.raises(ValueError, match="chunk_steps"):
         mpc_mjx.track(arm_c, np.zeros((5, 6)), 2, np.zeros((5, 3)), chunk_steps=0)
+
+
+def test_mjx_tracker_stopped_goes_on_where_it_stopped(arms, tmp_path):
+    """A run stopped between chunks keeps the simulator states and plans in its resume file; the
+    next run with the same programs goes on from there and plans what one whole run plans."""
+    arm_s, arm_c = arms
+    k, cfg = 3, mpc.MpcConfig(horizon_steps=1, iterations=1)
+    programs = np.stack([circle(0.7), kite(0.7)])
+    targets = arm_s.rollout(programs, backend="c")
+    whole, _ = mpc_mjx.track(arm_c, targets, k, programs, cfg, chunk_steps=3)
+    resume, logs = tmp_path / "partial.npz", []
+    run = dict(cfg=cfg, chunk_steps=3, resume=resume, log=logs.append)
+    with pytest.raises(mpc_mjx.TrackingStopped, match="after 3 of 7"):
+        mpc_mjx.track(arm_c, targets, k, programs, should_stop=lambda: True, **run)
+    assert resume.exists() and not logs
+    with pytest.raises(mpc_mjx.TrackingStopped, match="after 6 of 7"):
+        mpc_mjx.track(arm_c, targets, k, programs, should_stop=lambda: True, **run)
+    assert logs == [f"resuming from {resume}: 3 of 7 source steps done"]
+    got, info = mpc_mjx.track(arm_c, targets, k, programs, **run)
+    assert info["resumed_steps"] == 6 and info["healthy"].all() and not resume.exists()
+    np.testing.assert_array_equal(got, whole)
+    # Progress saved for other programs is not used.
+    with pytest.raises(mpc_mjx.TrackingStopped):
+        mpc_mjx.track(arm_c, targets[::-1], k, programs[::-1], should_stop=lambda: True, **run)
+    logs.clear()
+    got, info = mpc_mjx.track(arm_c, targets, k, programs, **run)
+    assert info["resumed_steps"] == 0 and "saved for other programs" in logs[0]
+    np.testing.assert_array_equal(got, whole)

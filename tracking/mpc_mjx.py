@@ -19,11 +19,15 @@ so the two trackers' commands differ by the rounding that the Jacobian sees
 
 from __future__ import annotations
 
+import hashlib
 import time
+from collections.abc import Callable
+from pathlib import Path
 
 import numpy as np
 
 from mjx_arm.arm import Arm
+from mjx_arm.atomic import write_atomically
 from tracking.mpc import LINE_STEPS, MpcConfig, _batched
 
 #: Source steps per jitted call: each call's progress is shown, and the compile does not grow
@@ -116,6 +120,77 @@ def _planner(arm_c: Arm, k: int, cfg: MpcConfig):
     return jax.jit(advance)
 
 
+class TrackingStopped(RuntimeError):
+    """`track` was asked to stop between chunks; its progress is in the resume file.
+
+    Attributes: steps_done, n_steps (source steps planned so far, in all), path (the file).
+    """
+
+    def __init__(self, steps_done: int, n_steps: int, path: Path | None):
+        self.steps_done, self.n_steps, self.path = steps_done, n_steps, path
+        where = f"; {path} resumes it" if path is not None else " (no resume file)"
+        super().__init__(f"tracking stopped after {steps_done} of {n_steps} source steps{where}")
+
+
+def _fingerprint(arm_c: Arm, k: int, cfg: MpcConfig, init, target, chunk_steps: int) -> str:
+    """What a resume file must match: the arm, k, the settings, the inputs and the chunking."""
+    h = hashlib.sha256()
+    h.update(repr((arm_c.model_hash, k, cfg, chunk_steps)).encode())
+    for a in (init, target):
+        h.update(repr(a.shape).encode())
+        h.update(np.ascontiguousarray(a).tobytes())
+    return h.hexdigest()
+
+
+def _save_progress(path: Path, key: str, chunk: int, carry, applied: list, cost: list) -> None:
+    """Writes the carry's leaves and the plans so far to `path` (atomically)."""
+    import jax
+
+    leaves = {f"leaf{i}": np.asarray(x) for i, x in enumerate(jax.tree.leaves(carry))}
+    write_atomically(
+        path,
+        lambda f: np.savez(
+            f, key=key, chunk=chunk, applied=np.concatenate(applied, 1),
+            cost=np.concatenate(cost, 1), **leaves,
+        ),
+    )  # fmt: skip
+
+
+def _load_progress(path: Path, key: str, carry, log):
+    """(chunk, carry, applied, cost) saved in `path` for the same `key`, else None."""
+    import jax
+    import jax.numpy as jnp
+
+    if not path.exists():
+        return None
+    try:
+        with np.load(path) as f:
+            if str(f["key"]) != key:
+                log(f"{path} was saved for other programs or settings; starting afresh")
+                return None
+            leaves, treedef = jax.tree.flatten(carry)
+            saved = [f[f"leaf{i}"] for i in range(len(leaves))]
+            if any(a.shape != b.shape for a, b in zip(saved, leaves, strict=True)):
+                raise ValueError("leaf shapes differ")
+            restored = jax.tree.unflatten(treedef, [jnp.asarray(a) for a in saved])
+            return int(f["chunk"]), restored, [f["applied"]], [f["cost"]]
+    except (OSError, ValueError, KeyError) as err:
+        log(f"{path} is unreadable ({err}); starting afresh")
+        return None
+
+
+_PLANNERS: dict = {}
+
+
+def _cached_planner(arm_c: Arm, k: int, cfg: MpcConfig):
+    """`_planner`, built once per arm, k and settings in a process: a second call (the next
+    shard of a teacher) reuses the compiled program instead of tracing it again."""
+    key = (id(arm_c), k, cfg)
+    if key not in _PLANNERS:  # the arm is kept with it, so that its id is not reused
+        _PLANNERS[key] = (arm_c, _planner(arm_c, k, cfg))
+    return _PLANNERS[key][1]
+
+
 def _rest_carry(arm_c: Arm, n_prog: int):
     """(MJX data, pressure, healthy) at rest for n_prog programs (float32)."""
     import jax
@@ -140,6 +215,9 @@ def track(
     cfg: MpcConfig = MpcConfig(),
     progress: bool = False,
     chunk_steps: int = CHUNK_STEPS,
+    resume: Path | None = None,
+    should_stop: Callable[[], bool] | None = None,
+    log=print,
 ) -> tuple[np.ndarray, dict]:
     """D_c commands that track target poses, planned in MJX (`tracking.mpc.track`'s API).
 
@@ -151,14 +229,21 @@ def track(
       cfg: the tracker's settings; `horizon_steps` must be 1.
       progress: show a progress bar over source steps.
       chunk_steps: source steps per jitted call.
+      resume: a file for the progress (the simulator states and the plans so far): read when it
+        was saved for the same arm, k, settings, programs and chunking, so that a stopped run
+        goes on where it stopped; written when `should_stop` stops the run; removed at the end.
+        Programs of 60 s at k = 20 outlast a 10-minute call on one GPU.
+      should_stop: called after each chunk; True stops the run (`TrackingStopped`).
 
     Returns:
       (commands [T * k, 3] or [S, T * k, 3] (bar), each held k periods; info: "cost" [T] or
       [S, T] (squared residual of the applied step), "wall_s", "first_chunk_s" (the compile and
-      the first chunk), "healthy" [S] (no program's simulation diverged)).
+      the first chunk, in this call), "healthy" [S] (no program's simulation diverged),
+      "resumed_steps" (source steps read from `resume`)).
 
     Raises:
       ValueError: `mpc.track`'s, a horizon other than 1, or chunk_steps < 1.
+      TrackingStopped: `should_stop` said so, after the progress was written to `resume`.
     """
     import jax.numpy as jnp
 
@@ -170,18 +255,29 @@ def track(
     n_prog, n_steps, _ = targets.shape
     init = np.clip(init, arm_c.valve.p_min_bar, arm_c.valve.p_max_bar)
     t0 = time.perf_counter()
-    advance = _planner(arm_c, k, cfg)
+    advance = _cached_planner(arm_c, k, cfg)
     carry = _rest_carry(arm_c, n_prog)
     n_chunks = -(-n_steps // chunk_steps)
     pad = n_chunks * chunk_steps - n_steps  # the last chunk is padded with its last step
     init_p = np.concatenate([init, np.repeat(init[:, -1:], pad, 1)], 1).astype(np.float32)
     target_p = np.concatenate([targets, np.repeat(targets[:, -1:], pad, 1)], 1).astype(np.float32)
-    applied, cost = [], []
-    chunks = range(n_chunks)
+    applied, cost, first = [], [], 0
+    key = None
+    if resume is not None:
+        key = _fingerprint(arm_c, k, cfg, init_p, target_p, chunk_steps)
+        saved = _load_progress(resume, key, carry, log)
+        if saved is not None:
+            first, carry, applied, cost = saved
+            log(f"resuming from {resume}: {first * chunk_steps} of {n_steps} source steps done")
+    resumed_steps = min(first * chunk_steps, n_steps)
+    chunks = range(first, n_chunks)
     if progress:
         from tqdm import tqdm
 
-        chunks = tqdm(chunks, desc="mpc (mjx)", unit=f"x{chunk_steps} steps")
+        chunks = tqdm(chunks, desc="mpc (mjx)", unit=f"x{chunk_steps} steps", initial=first,
+                      total=n_chunks)  # fmt: skip
+    first_chunk_s = 0.0
+    healthy = carry[2]
     for c in chunks:
         part = slice(c * chunk_steps, (c + 1) * chunk_steps)
         carry, applied_c, cost_c, healthy = advance(
@@ -189,8 +285,14 @@ def track(
         )
         applied.append(np.asarray(applied_c, np.float64))
         cost.append(np.asarray(cost_c, np.float64))
-        if c == 0:
+        if c == first:
             first_chunk_s = time.perf_counter() - t0
+        if c + 1 < n_chunks and should_stop is not None and should_stop():
+            if resume is not None:
+                _save_progress(resume, key, c + 1, carry, applied, cost)
+            raise TrackingStopped(min((c + 1) * chunk_steps, n_steps), n_steps, resume)
+    if resume is not None:
+        resume.unlink(missing_ok=True)
     applied = np.concatenate(applied, 1)[:, :n_steps]
     cost = np.concatenate(cost, 1)[:, :n_steps]
     commands = np.repeat(applied, k, axis=1)
@@ -199,5 +301,6 @@ def track(
         "wall_s": time.perf_counter() - t0,
         "first_chunk_s": first_chunk_s,
         "healthy": np.asarray(healthy),
+        "resumed_steps": resumed_steps,
     }
     return (commands[0] if single else commands), info
