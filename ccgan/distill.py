@@ -58,7 +58,8 @@ from ccgan.stage import (
 )
 from ccgan.translator import Translator
 from mjx_arm.atomic import write_atomically
-from mjx_arm.programs import shape_like_programs
+from mjx_arm.babble import BabbleConfig
+from mjx_arm.programs import babble_programs, shape_like_programs
 from tracking import mpc, mpc_mjx
 from tracking.config import ConfigError, check_fields
 from tracking.held import run_dc, stretch
@@ -78,6 +79,12 @@ class DistillConfig:
     (`shape_like_program(full_scale=True)`, their own random stream)."""
     n_val_full: int = 0
     """More held-out programs at the full amplitude."""
+    n_train_babble: int = 0
+    """More teacher programs from the babbling family (`mjx_arm.babble`'s, the paper's holds of
+    0.5-3 s between 0 and 3.5 bar, a stream of their own): programs unlike any shape, for a
+    translator that meets programs it was not written for."""
+    n_val_babble: int = 0
+    """More held-out babbling programs."""
     duration_s: float = 20.0
     """Length of every program, from rest (s of source time)."""
     window_s: float = 2.0
@@ -131,6 +138,8 @@ class DistillConfig:
                 "n_val": 0,
                 "n_train_full": 0,
                 "n_val_full": 0,
+                "n_train_babble": 0,
+                "n_val_babble": 0,
                 "duration_s": period,
                 "window_s": period,
                 "horizon_steps": 1,
@@ -154,15 +163,21 @@ class DistillConfig:
             raise ConfigError(
                 "horizon_steps", f"must be 1 with teacher_backend 'mjx', got {self.horizon_steps}"
             )
-        n_train = self.n_train + self.n_train_full
-        if self.batch_size > n_train:
+        if self.batch_size > self.n_train_programs:
             raise ConfigError(
                 "batch_size",
-                f"must be <= n_train + n_train_full = {n_train} training programs,"
-                f" got {self.batch_size}",
+                f"must be <= n_train + n_train_full + n_train_babble = {self.n_train_programs}"
+                f" training programs, got {self.batch_size}",
             )
-        if self.n_val + self.n_val_full < 1:
-            raise ConfigError("n_val", "plus n_val_full must be >= 1 (held-out programs)")
+        if self.n_val + self.n_val_full + self.n_val_babble < 1:
+            raise ConfigError(
+                "n_val", "plus n_val_full and n_val_babble must be >= 1 (held-out programs)"
+            )
+
+    @property
+    def n_train_programs(self) -> int:
+        """Training programs of every family."""
+        return self.n_train + self.n_train_full + self.n_train_babble
 
     def teacher_key(self) -> dict:
         """The settings the cached teacher commands depend on (not the program counts)."""
@@ -190,6 +205,17 @@ def _next_shard(pending: list, size: int) -> list:
     return shard
 
 
+def _programs(config: DistillConfig, family: str, split: str, n: int) -> np.ndarray:
+    """The first n programs [n, T, 3] (bar) of a split; program i is the same whatever n is."""
+    if family == "babbling":
+        spec = BabbleConfig(seed=config.seed, duration_s=config.duration_s)
+        return babble_programs(spec, np.arange(n), domain="distill", split=split)
+    full_scale = family == "shape_like_full"
+    return shape_like_programs(
+        n, config.duration_s, seed=config.seed, split=f"distill/{split}", full_scale=full_scale
+    )
+
+
 def teacher_data(
     config: DistillConfig,
     arm_s,
@@ -211,18 +237,20 @@ def teacher_data(
     next run goes on from there (`tracking.mpc_mjx.TrackingStopped` is raised).
 
     Returns:
-      dict of float32 arrays, each split followed by its full-amplitude part ("train" has
-      n_train + n_train_full programs, "val" n_val + n_val_full):
+      dict of float32 arrays, each split followed by its full-amplitude and babbling parts
+      ("train" has n_train + n_train_full + n_train_babble programs, "val" the same of val):
       "p_train" [N, T, 3] and "p_val" (bar), "x_train" [N, T, 6] and
       "x_val" (m, unit d3), "c_train" [N, T, 3] and "c_val" (teacher commands per source step,
       bar), plus "teacher_val_x_err_cm" [n_val] (the teacher's own held-out X_err).
     """
     key = json.dumps(config.teacher_key() | {"k": k, "model": arm_c.model_hash}, sort_keys=True)
-    splits = (
-        ("train", config.n_train, False),
-        ("train_full", config.n_train_full, True),
-        ("val", config.n_val, False),
-        ("val_full", config.n_val_full, True),
+    splits = (  # (split, programs, family: shape-like at its scale, at full scale, babbling)
+        ("train", config.n_train, "shape_like"),
+        ("train_full", config.n_train_full, "shape_like_full"),
+        ("train_babble", config.n_train_babble, "babbling"),
+        ("val", config.n_val, "shape_like"),
+        ("val_full", config.n_val_full, "shape_like_full"),
+        ("val_babble", config.n_val_babble, "babbling"),
     )
     store: dict[str, np.ndarray] = {}
     if cache is not None and cache.exists():
@@ -240,17 +268,14 @@ def teacher_data(
         partial = None if cache is None else cache.with_name(cache.stem + "_partial.npz")
         track, resumable = mpc_mjx.track, {"resume": partial, "should_stop": should_stop}
     pending = []  # (split, its programs not planned yet), in the splits' order
-    for split, n, full_scale in splits:
+    for split, n, family in splits:
         have = len(store.get(f"p_{split}", ()))
         if n == 0:
             continue
         if have >= n:
             log(f"teacher: {n} {split} programs read from {cache}")
             continue
-        programs = shape_like_programs(
-            n, config.duration_s, seed=config.seed, split=f"distill/{split}", full_scale=full_scale
-        )
-        pending.append((split, programs[have:]))
+        pending.append((split, _programs(config, family, split, n)[have:]))
     total, planned = sum(len(programs) for _, programs in pending), 0
     while pending:
         shard = _next_shard(pending, config.teacher_shard)
@@ -362,7 +387,7 @@ def init_imitation(translators: list[Translator], config: DistillConfig, data: I
         out = tr.generator.apply(g_params, s_batch)[..., :PRESSURE_DIM]
         return jnp.mean(step_weight * (out - c_batch) ** 2)
 
-    n_train = config.n_train + config.n_train_full
+    n_train = config.n_train_programs
     total_steps = config.epochs * (n_train // config.batch_size)
     rate = optax.cosine_decay_schedule(config.learning_rate, total_steps, config.final_lr_factor)
     opt = optax.adam(rate if config.final_lr_factor != 1.0 else config.learning_rate)
@@ -485,7 +510,7 @@ def distill(
       "best_val_x_err_cm" [S], "val_x_err_cm_before" [S] (at this k), "k", "wall_s").
     """
     k = config.hold_factor or common_k(translators)
-    n_train = config.n_train + config.n_train_full  # >= batch_size (DistillConfig checks)
+    n_train = config.n_train_programs  # >= batch_size (DistillConfig checks)
     t0 = time.perf_counter()
 
     def should_stop() -> bool:

@@ -275,3 +275,26 @@ def test_final_lr_factor_decays_the_step_size_over_the_run():
     assert moved[0.0] == 0.0 and moved[1.0] > 0.0
     with pytest.raises(distill.ConfigError, match="final_lr_factor"):
         dataclasses.replace(TINY, final_lr_factor=-0.5)
+
+
+def test_teacher_data_adds_the_babbling_family(arms, tmp_path):
+    """Babbling programs (their own stream) follow each split's shape-like programs, and count
+    towards the batch-size check."""
+    from mjx_arm.babble import BabbleConfig
+    from mjx_arm.programs import babble_programs
+
+    arm_s, arm_c = arms
+    config = dataclasses.replace(
+        TINY, n_train=1, n_train_babble=1, n_val=0, n_val_babble=1, duration_s=0.5, batch_size=2
+    )
+    logs = []
+    data = distill.teacher_data(config, arm_s, arm_c, 2, tmp_path / "t.npz", log=logs.append)
+    assert data["p_train"].shape == (2, 5, 3) and data["p_val"].shape == (1, 5, 3)
+    spec = BabbleConfig(seed=0, duration_s=0.5)
+    np.testing.assert_array_equal(
+        data["p_train"][1], babble_programs(spec, [0], domain="distill", split="train_babble")[0]
+    )
+    assert not np.array_equal(data["p_train"][1], data["p_val"][0])  # a stream per split
+    assert data["c_train"].shape == (2, 5, 3) and np.isfinite(data["teacher_val_x_err_cm"]).all()
+    with pytest.raises(distill.ConfigError, match="n_train_babble"):
+        dataclasses.replace(config, batch_size=3)
