@@ -12,7 +12,8 @@ held at another k than its own is marked so in the table: it shows how a transla
 one k carries to another, not what distilling at that k gives.
 
     python -m studies.error_vs_k --ks 10 15 20 \\
-        --translators 15=studies/results/h200/issue30/distill_k15/translator_seed0.ckpt,... \\
+        --translators 10=studies/results/h100/issue30/distill_k10/translator_seed0.ckpt,... \\
+        15=studies/results/h200/issue30/distill_k15/translator_seed0.ckpt,... 20=... \\
         --out studies/results/cpu/issue30/error_vs_k
 """
 
@@ -26,6 +27,7 @@ import numpy as np  # noqa: E402
 
 import mjx_arm  # noqa: E402
 from bench import run_header, write_results  # noqa: E402
+from ccgan.checkpoint import CheckpointError  # noqa: E402
 from ccgan.cli import cli_parser  # noqa: E402
 from ccgan.translator import load_translator  # noqa: E402
 from mjx_arm.programs import shape_like_programs  # noqa: E402
@@ -67,9 +69,15 @@ def main(argv=None) -> None:
         p.error(str(err))
     if min(a.ks) < 1 or a.n < 1:
         p.error("--ks and --n must be >= 1")
-    translators = {k: [load_translator(path) for path in files] for k, files in sets.items()}
     arm_s = mjx_arm.load(a.model, "source")
     arm_c = mjx_arm.load(a.model, "constrained")
+    try:  # a translator of another arm is refused, not scored on this one
+        translators = {
+            k: [load_translator(path, model_hash=arm_c.model_hash) for path in files]
+            for k, files in sets.items()
+        }
+    except (ValueError, CheckpointError) as err:
+        p.error(f"--translators: {err}")
     programs = shape_like_programs(a.n, a.duration, seed=0, split="error_vs_k", full_scale=True)
     targets = arm_s.rollout(programs, backend="c")
     # Each translator's commands, one per source step [n, T, 3] (bar).
@@ -137,7 +145,14 @@ def main(argv=None) -> None:
     ax.plot(ks, [row["teacher"] for row in rows], "s-", label="teacher (tracker)")
     for k_set in sets:
         means = [row["translators"][str(k_set)]["mean"] for row in rows]
-        ax.plot(ks, means, "^-", label=f"distilled at k = {k_set}")
+        ax.plot(ks, means, "^:", alpha=0.6, label=f"distilled at k = {k_set}, held at k")
+    own = [row for row in rows if str(row["k"]) in row["translators"]]
+    if own:  # each k's own translators: what distilling at that k gives
+        ax.plot(
+            [row["k"] for row in own],
+            [row["translators"][str(row["k"])]["mean"] for row in own],
+            "*-", color="black", markersize=10, label="distilled at its own k",
+        )  # fmt: skip
     ax.set(xlabel="k (control periods per command)", ylabel="X_err (cm)", xticks=ks)
     ax.set_title(f"{a.n} held-out programs of {a.duration:g} s in D_c")
     ax.legend(fontsize=8)

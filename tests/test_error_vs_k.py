@@ -33,3 +33,11 @@ def test_a_tiny_run_gives_every_method_at_every_k(tmp_path):
     text = out.with_suffix(".md").read_text()
     assert "(held at k)" in text.splitlines()[-2] and "(held at k)" not in text.splitlines()[-1]
     assert out.with_suffix(".png").stat().st_size > 0
+
+
+def test_a_translator_of_another_arm_is_refused(capsys):
+    """The chain's CCGAN-GP of the previous model is not scored on models/softarm.xml."""
+    old_arm = "results/paper/run/ccgan/translator_seed0.ckpt"
+    with pytest.raises(SystemExit):
+        main(["--ks", "15", "--translators", f"5={old_arm}", "--out", "unused"])
+    assert "--translators" in capsys.readouterr().err
