@@ -106,7 +106,7 @@ class DistillConfig:
     final_lr_factor: float = 1.0
     """The step size falls along a cosine from learning_rate to learning_rate x this over the
     run's epochs (1: constant). At k = 20 the held-out score of the constant rate moved by up to
-    2x between validations (docs/distillation.md)."""
+    1.8x between validations (docs/distillation.md)."""
     eval_every: int = 50
     """Epochs between held-out scores (and the last epoch)."""
     seed: int = 0
@@ -203,6 +203,17 @@ def _next_shard(pending: list, size: int) -> list:
             pending[0] = (split, programs[size:])
         size -= len(shard[-1][1])
     return shard
+
+
+def _stop_check(config: DistillConfig, t0: float, stop: threading.Event | None):
+    """`should_stop()` for the teacher: True once `config.max_wall_s` (0: no limit) seconds
+    have passed since t0 (`time.perf_counter()`) or `stop` is set."""
+
+    def should_stop() -> bool:
+        late = config.max_wall_s > 0 and time.perf_counter() - t0 > config.max_wall_s
+        return late or (stop is not None and stop.is_set())
+
+    return should_stop
 
 
 def _programs(config: DistillConfig, family: str, split: str, n: int) -> np.ndarray:
@@ -513,10 +524,7 @@ def distill(
     n_train = config.n_train_programs  # >= batch_size (DistillConfig checks)
     t0 = time.perf_counter()
 
-    def should_stop() -> bool:
-        late = config.max_wall_s > 0 and time.perf_counter() - t0 > config.max_wall_s
-        return late or (stop is not None and stop.is_set())
-
+    should_stop = _stop_check(config, t0, stop)
     data = imitation_data(
         config, translators[0], arm_s, arm_c, k, cache, log, progress, should_stop
     )
@@ -618,10 +626,7 @@ def _run(a: argparse.Namespace, config: DistillConfig, stage, stop: threading.Ev
         k = config.hold_factor or common_k(stage.translators)
         t0 = time.perf_counter()
 
-        def should_stop() -> bool:
-            late = config.max_wall_s > 0 and time.perf_counter() - t0 > config.max_wall_s
-            return late or stop.is_set()
-
+        should_stop = _stop_check(config, t0, stop)
         data = teacher_data(
             config, stage.arm_s, stage.arm_c, k, stage.out / "teacher.npz", progress=True,
             should_stop=should_stop,
