@@ -204,6 +204,14 @@ def stage_parser(module: str, doc: str) -> argparse.ArgumentParser:
         help="D_c domain (mjx_arm.DOMAINS): the one the translators translate into",
     )
     p.add_argument(
+        "--start-domain",
+        default=None,
+        choices=sorted(d for d in mjx_arm.DOMAINS if d != "source"),
+        help="the domain the --translators were trained for (default: --domain). Another"
+        " domain's translators only start the stage: what it writes is labelled with --domain"
+        " (e.g. the aged arm's distillation started from the D_c CCGAN-GP)",
+    )
+    p.add_argument(
         TRUST_FLAG,
         action="store_true",
         help="accept translator files that do not record their method, domains and arm (the"
@@ -261,8 +269,9 @@ def trained_model_hash(meta: dict) -> str | None:
 def start_stage(p: argparse.ArgumentParser, a, module: str, config: dict, argv) -> Stage:
     """Checks and loads what `stage_parser`'s flags name; `module` and `config` go into the run
     record. Every problem (seeds, output folder, an unreadable translator or MJCF, translators
-    recorded on another arm, or for another domain, or recording neither without
-    --trust-unlabelled-translators) is a usage error (status 2) before any simulation starts."""
+    recorded on another arm, or for a domain other than --start-domain (default --domain), or
+    recording neither without --trust-unlabelled-translators) is a usage error (status 2)
+    before any simulation starts."""
     import jax
 
     from mjx_arm.machine import cpu_model, enable_compilation_cache
@@ -291,12 +300,15 @@ def start_stage(p: argparse.ArgumentParser, a, module: str, config: dict, argv) 
                 meta,
                 path,
                 source_domain="source",
-                target_domain=a.domain,
+                target_domain=a.start_domain or a.domain,
                 model_hash=arm_c.model_hash,
                 trust_unlabelled=a.trust_unlabelled_translators,
             )
         except checkpoint.CheckpointError as err:
-            p.error(f"--translators: {err} (--model {a.model}, --domain {a.domain})")
+            p.error(
+                f"--translators: {err} (--model {a.model},"
+                f" --start-domain {a.start_domain or a.domain})"
+            )
     enable_compilation_cache()
     out = Path(a.out)
     out.mkdir(parents=True, exist_ok=True)
@@ -308,6 +320,7 @@ def start_stage(p: argparse.ArgumentParser, a, module: str, config: dict, argv) 
         "model": str(a.model),
         "model_hash": arm_c.model_hash,
         "domain": a.domain,
+        "start_domain": a.start_domain or a.domain,
         "method": module.rsplit(".", 1)[-1],
         "sources": [str(x) for x in a.translators],
         "seeds": seeds,

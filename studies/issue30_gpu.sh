@@ -19,6 +19,9 @@
 #      a second distillation on a copy of the same teacher cache (distill_kK_run2): run to run.
 #   SUFFIX=_fresh before steps 3 and 4 plans and distills in distill_kK_fresh instead: a second
 #   run from an empty folder, the teacher replanned.
+#   DOMAIN=aged before steps 3 and 4 distills for the aged arm (stiffness x0.7) in aged_kK: G_c
+#   starts from the same D_c CCGAN-GP (--start-domain constrained), the teacher tracks in the
+#   aged arm.
 #   5. bash studies/issue30_gpu.sh length K [studies.program_length flags]
 #      the distilled translators, their teacher and stretch only on held-out 60 s programs.
 set -uo pipefail
@@ -36,10 +39,14 @@ pack() {
 }
 left() { echo $((570 - (SECONDS - start))); }
 START=studies/results/h200/issue29/chain/ccgan
+DOMAIN=${DOMAIN:-constrained}
+PREFIX=distill_k
+[[ $DOMAIN == constrained ]] || PREFIX=${DOMAIN}_k
 distill() { # distill() OUT_DIR K [--teacher-only] [ccgan.distill flags]
   local out=$1 k=$2
   shift 2
-  timeout "$(left)" $PY -m ccgan.distill --model $MODEL \
+  timeout "$(left)" $PY -m ccgan.distill --model $MODEL --domain "$DOMAIN" \
+    --start-domain constrained \
     --translators $START/translator_seed{0,1,2}.ckpt --seeds 0 1 2 --hold-factor "$k" \
     --teacher-backend mjx --horizon-steps 1 --iterations 1 --out "$out" \
     --max-wall-s $(($(left) - 60)) "$@"
@@ -54,13 +61,13 @@ bench)
 teacher)
   k=$2
   shift 2
-  distill "$RUN/distill_k$k${SUFFIX:-}" "$k" --teacher-only "$@"
+  distill "$RUN/$PREFIX$k${SUFFIX:-}" "$k" --teacher-only "$@"
   pack
   ;;
 distill)
   k=$2
   shift 2
-  distill "$RUN/distill_k$k${SUFFIX:-}" "$k" "$@"
+  distill "$RUN/$PREFIX$k${SUFFIX:-}" "$k" "$@"
   pack
   ;;
 rerun)

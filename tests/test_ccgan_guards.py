@@ -324,6 +324,16 @@ def test_stages_simulate_the_arm_named_by_model(tmp_path, small_arm, shipped, ca
         err = usage_error(distill.main, argv, capsys)
         assert all(n in err for n in named) and not (tmp_path / "o2").exists()
 
+    # Another domain's translator only starts the stage when --start-domain names its domain;
+    # the stage is still the --domain's (what it writes is labelled so: the test below).
+    p = distill.build_parser()
+    a = p.parse_args([*argv, "--start-domain", "aged"])
+    stage = distill.start_stage(p, a, "ccgan.distill", {}, [])
+    assert stage.arm_c.domain.name == "constrained"
+    assert (stage.run["domain"], stage.run["start_domain"]) == ("constrained", "aged")
+    err = usage_error(distill.main, [*argv, "--start-domain", "constrained"], capsys)
+    assert "'aged'" in err and "--start-domain constrained" in err
+
 
 def labelled(method, target_domain, model_hash) -> dict:
     """A translator file's labels (`ccgan.translator.LABELS`)."""
