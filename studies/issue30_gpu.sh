@@ -22,6 +22,7 @@
 #   DOMAIN=aged before steps 3 and 4 distills for the aged arm (stiffness x0.7) in aged_kK: G_c
 #   starts from the same D_c CCGAN-GP (--start-domain constrained), the teacher tracks in the
 #   aged arm.
+#   BUDGET_S=S (default 570) is what one invocation may use of a call: two in one call share it.
 #   5. bash studies/issue30_gpu.sh length K [studies.program_length flags]
 #      the distilled translators, their teacher and stretch only on held-out 60 s programs.
 set -uo pipefail
@@ -37,7 +38,7 @@ pack() {
   echo "call: $((SECONDS - start)) s"
   ls -la "$OUT"
 }
-left() { echo $((570 - (SECONDS - start))); }
+left() { echo $((${BUDGET_S:-570} - (SECONDS - start))); } # BUDGET_S: seconds this script may use of the call
 START=studies/results/h200/issue29/chain/ccgan
 DOMAIN=${DOMAIN:-constrained}
 PREFIX=distill_k
