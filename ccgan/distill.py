@@ -227,6 +227,33 @@ def _programs(config: DistillConfig, family: str, split: str, n: int) -> np.ndar
     )
 
 
+def _splits(config: DistillConfig) -> tuple:
+    """(split, programs, family) of the teacher's data, in the order they are stored: the
+    training splits, then the held-out ones; the families are shape-like at its scale, at full
+    scale, and babbling."""
+    return (
+        ("train", config.n_train, "shape_like"),
+        ("train_full", config.n_train_full, "shape_like_full"),
+        ("train_babble", config.n_train_babble, "babbling"),
+        ("val", config.n_val, "shape_like"),
+        ("val_full", config.n_val_full, "shape_like_full"),
+        ("val_babble", config.n_val_babble, "babbling"),
+    )
+
+
+def held_out_programs(config: DistillConfig) -> np.ndarray:
+    """The held-out programs [V, T, 3] (bar) that pick a run's iterate, as `teacher_data`'s
+    "p_val" holds them; rebuilt from the settings alone, without the teacher (studies score
+    other commands on them)."""
+    return np.concatenate(
+        [
+            _programs(config, family, split, n)
+            for split, n, family in _splits(config)
+            if split.startswith("val") and n > 0
+        ]
+    )
+
+
 def teacher_data(
     config: DistillConfig,
     arm_s,
@@ -255,14 +282,7 @@ def teacher_data(
       bar), plus "teacher_val_x_err_cm" [n_val] (the teacher's own held-out X_err).
     """
     key = json.dumps(config.teacher_key() | {"k": k, "model": arm_c.model_hash}, sort_keys=True)
-    splits = (  # (split, programs, family: shape-like at its scale, at full scale, babbling)
-        ("train", config.n_train, "shape_like"),
-        ("train_full", config.n_train_full, "shape_like_full"),
-        ("train_babble", config.n_train_babble, "babbling"),
-        ("val", config.n_val, "shape_like"),
-        ("val_full", config.n_val_full, "shape_like_full"),
-        ("val_babble", config.n_val_babble, "babbling"),
-    )
+    splits = _splits(config)
     store: dict[str, np.ndarray] = {}
     if cache is not None and cache.exists():
         try:
@@ -331,14 +351,16 @@ class ImitationData(NamedTuple):
     s_train [N, T, 9]: normalised samples (`ccgan.data.samples`) of the training programs;
     c_train [N, T, 3]: the teacher's commands for them (pressures normalised to [0, 1]);
     s_val [V, T, 9] and x_val [V, T, 6] (float64): the held-out programs' samples and D_s
-    targets; c_val [V, T, 3]: the teacher's held-out commands (bar); teacher_val_x_err_cm [V]:
-    the teacher's own held-out X_err (cm); window: control steps in window_s.
+    targets; p_val [V, T, 3]: their D_s commands (bar), which stretch only holds k periods;
+    c_val [V, T, 3]: the teacher's held-out commands (bar); teacher_val_x_err_cm [V]: the
+    teacher's own held-out X_err (cm); window: control steps in window_s.
     """
 
     s_train: Any
     c_train: Any
     s_val: Any
     x_val: np.ndarray
+    p_val: np.ndarray
     c_val: np.ndarray
     teacher_val_x_err_cm: np.ndarray
     window: int
@@ -365,6 +387,7 @@ def imitation_data(
         c_train=jnp.asarray(normalise_pressure(data["c_train"]), jnp.float32),
         s_val=jnp.asarray(samples(data["p_val"], data["x_val"], bounds)),
         x_val=np.asarray(data["x_val"], np.float64),
+        p_val=np.asarray(data["p_val"], np.float64),
         c_val=data["c_val"],
         teacher_val_x_err_cm=data["teacher_val_x_err_cm"],
         window=int(round(config.window_s * mjx_arm.CONTROL_HZ)),
@@ -463,14 +486,19 @@ def _epoch(step, params, opt_state, data: ImitationData, order: np.ndarray, batc
 
 
 def _new_history(arm_c, k: int, data: ImitationData) -> dict:
-    """The history of a distill run before its first epoch, with the teacher's own held-out
-    X_err (cm) over the whole programs and over their first window_s."""
+    """The history of a distill run before its first epoch, with the held-out X_err (cm) over
+    the whole programs and over their first window_s of the teacher and of stretch only (the
+    D_s commands held k periods): what the translator must approach, and what it must beat."""
     teacher_whole = float(data.teacher_val_x_err_cm.mean())
     head, _ = window_and_whole_x_err_cm(arm_c, data.c_val, k, data.x_val, data.window)
+    stretch_head, stretch_whole = window_and_whole_x_err_cm(
+        arm_c, data.p_val, k, data.x_val, data.window
+    )
     return {
         "train_loss": [],
         "val": {},
         "teacher_val_x_err_cm": {"whole": teacher_whole, "window": float(head)},
+        "stretch_val_x_err_cm": {"whole": float(stretch_whole), "window": float(stretch_head)},
         "complete": False,
         "k": k,
     }
@@ -517,7 +545,8 @@ def distill(
     Returns:
       (best G_c parameters per translator, history: "train_loss" [epochs, S] (weighted mean
       squared normalised pressure error), "val" {epoch: {"score", "window", "whole"} [S] cm},
-      "teacher_val_x_err_cm" (whole, window), "best_epoch" [S] (0: the original was best),
+      "teacher_val_x_err_cm" and "stretch_val_x_err_cm" (whole, window), "best_epoch" [S]
+      (0: the original was best),
       "best_val_x_err_cm" [S], "val_x_err_cm_before" [S] (at this k), "k", "wall_s").
     """
     k = config.hold_factor or common_k(translators)
@@ -665,7 +694,8 @@ def _run(a: argparse.Namespace, config: DistillConfig, stage, stop: threading.Ev
         f"wrote {stage.out}: held-out X_err (cm) before"
         f" {np.round(history['val_x_err_cm_before'], 4).tolist()} -> best"
         f" {np.round(history['best_val_x_err_cm'], 4).tolist()} at epochs"
-        f" {history['best_epoch']}; teacher {history['teacher_val_x_err_cm']}; "
+        f" {history['best_epoch']}; teacher {history['teacher_val_x_err_cm']};"
+        f" stretch only {history['stretch_val_x_err_cm']}; "
         f"{history['wall_s']:.1f} s"
     )
 

@@ -13,6 +13,7 @@ from ccgan.finetune import x_err_cm_c
 from ccgan.translator import translator_path
 from mjx_arm import constants
 from mjx_arm.programs import shape_like_programs
+from tracking.metrics import position_error_cm
 
 TINY = distill.DistillConfig(
     n_train=4, n_val=2, duration_s=1.0, epochs=4, batch_size=2, eval_every=2, learning_rate=3e-3
@@ -68,6 +69,12 @@ def test_distill_imitates_the_teacher_and_caches_it(arms, tmp_path):
     logs.clear()
     data = distill.teacher_data(TINY, arm_s, arm_c, shipped.k, cache, log=logs.append)
     assert all("read from" in line for line in logs) and len(logs) == 2
+    np.testing.assert_array_equal(distill.held_out_programs(TINY).astype(np.float32), data["p_val"])
+    # Stretch only on the same held-out programs: the D_s commands held k periods in D_c.
+    k = shipped.k
+    held = arm_c.rollout(np.repeat(data["p_val"], k, axis=1), backend="c")[:, k - 1 :: k]
+    want = position_error_cm(held, data["x_val"]).mean()
+    assert np.isclose(history["stretch_val_x_err_cm"]["whole"], want, rtol=1e-6)
     tuned = dataclasses.replace(shipped, g_c_params=params[0])
     x_val = data["x_val"].astype(np.float64)
     pairs = zip(data["p_val"], x_val, strict=True)
@@ -260,7 +267,7 @@ def test_final_lr_factor_decays_the_step_size_over_the_run():
     data = distill.ImitationData(
         s_train=jnp.asarray(rng.uniform(size=(4, 6, 9)), jnp.float32),
         c_train=jnp.asarray(rng.uniform(size=(4, 6, 3)), jnp.float32),
-        s_val=None, x_val=None, c_val=None, teacher_val_x_err_cm=None, window=2,
+        s_val=None, x_val=None, p_val=None, c_val=None, teacher_val_x_err_cm=None, window=2,
     )  # fmt: skip
     config = dataclasses.replace(TINY, epochs=1, batch_size=4, final_lr_factor=0.0)
     step, start, opt_state = distill.init_imitation([translator], config, data)
