@@ -25,6 +25,8 @@ from tracking import held, metrics, mpc, mpc_mjx
 
 
 def main(argv=None) -> None:
+    import jax
+
     p = cli_parser("bench.teacher", __doc__)
     p.add_argument("--model", default="models/softarm.xml", help="the arm's MJCF")
     p.add_argument("--k", type=int, default=15, help="control periods each command is held")
@@ -33,6 +35,15 @@ def main(argv=None) -> None:
     p.add_argument("--c-programs", type=int, default=4, help="programs the C tracker plans")
     p.add_argument(
         "--mjx-programs", type=int, nargs="+", default=[4], help="batch sizes the MJX tracker plans"
+    )
+    p.add_argument(
+        "--matmul-precisions",
+        nargs="+",
+        default=["default"],
+        choices=["default", "highest"],
+        help="jax_default_matmul_precision of the MJX tracker, one row set each: 'default' lets"
+        " XLA use TensorFloat32 for float32 products on NVIDIA GPUs since Ampere, 'highest'"
+        " keeps them float32 (no difference on the CPU)",
     )
     p.add_argument("--out", required=True, help="output prefix (writes .json and .md)")
     a = p.parse_args(argv)
@@ -52,18 +63,23 @@ def main(argv=None) -> None:
     scored["C"], _ = mpc.track(arm_c, targets[:n_c], a.k, programs[:n_c], cfg, progress=True)
     wall = time.perf_counter() - t0
     rows.append({"backend": "C", "programs": n_c, "wall_s": wall, "first_chunk_s": None})
-    for n in sorted(a.mjx_programs):
-        commands, info = mpc_mjx.track(arm_c, targets[:n], a.k, programs[:n], cfg, progress=True)
-        rows.append(
-            {
-                "backend": "MJX",
-                "programs": n,
-                "wall_s": info["wall_s"],
-                "first_chunk_s": info["first_chunk_s"],
-                "diverged": int((~info["healthy"]).sum()),
-            }
-        )
-        scored.setdefault("MJX", commands[:n_c])
+    for precision in a.matmul_precisions:
+        name = "MJX" if precision == "default" else f"MJX, matmul precision {precision}"
+        for n in sorted(a.mjx_programs):
+            with jax.default_matmul_precision(None if precision == "default" else precision):
+                commands, info = mpc_mjx.track(
+                    arm_c, targets[:n], a.k, programs[:n], cfg, progress=True
+                )
+            rows.append(
+                {
+                    "backend": name,
+                    "programs": n,
+                    "wall_s": info["wall_s"],
+                    "first_chunk_s": info["first_chunk_s"],
+                    "diverged": int((~info["healthy"]).sum()),
+                }
+            )
+            scored.setdefault(name, commands[:n_c])
     for row in rows:
         row["programs_per_s"] = row["programs"] / row["wall_s"]
     scored["stretch"] = held.stretch(programs[:n_c], a.k)
