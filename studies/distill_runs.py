@@ -45,7 +45,7 @@ def stretch_only_cm(run: dict) -> float:
 
 def row(folder: Path, run: dict, stretch_cm: float, stretch_source: str) -> dict:
     """One run's numbers: its settings, each seed's kept held-out X_err, teacher, stretch only."""
-    history, config = run["history"], run["config"]
+    history, config = run["history"], DistillConfig(**run["config"])
     best = np.asarray(history["best_val_x_err_cm"])
     teacher = history["teacher_val_x_err_cm"]["whole"]
     return {
@@ -53,12 +53,11 @@ def row(folder: Path, run: dict, stretch_cm: float, stretch_source: str) -> dict
         "machine": run["machine"],
         "domain": run["domain"],
         "k": history["k"],
-        "training_programs": DistillConfig(**config).n_train_programs,
-        "babbling_programs": config.get("n_train_babble", 0),
-        "held_out_programs": len(held_out_programs(DistillConfig(**config))),
+        "training_programs": config.n_train_programs,
+        "babbling_programs": config.n_train_babble,
+        "held_out_programs": len(held_out_programs(config)),
         "epochs": history["epochs_run"],
-        "optimiser_steps": history["epochs_run"]
-        * (DistillConfig(**config).n_train_programs // config["batch_size"]),
+        "optimiser_steps": history["epochs_run"] * (config.n_train_programs // config.batch_size),
         "seeds_cm": best.tolist(),
         "best_epoch": history["best_epoch"],
         "start_cm": history["val_x_err_cm_before"],
