@@ -294,21 +294,19 @@ def start_stage(p: argparse.ArgumentParser, a, module: str, config: dict, argv) 
         arm_s, arm_c = (mjx_arm.load(a.model, domain=d) for d in ("source", a.domain))
     except (FileNotFoundError, ValueError) as err:  # ModelValidationError is a ValueError
         p.error(f"--model {a.model}: {err}")
+    start_domain = a.start_domain or a.domain
     for path, (_, meta) in zip(a.translators, sources, strict=True):
         try:
             check_labels(
                 meta,
                 path,
                 source_domain="source",
-                target_domain=a.start_domain or a.domain,
+                target_domain=start_domain,
                 model_hash=arm_c.model_hash,
                 trust_unlabelled=a.trust_unlabelled_translators,
             )
         except checkpoint.CheckpointError as err:
-            p.error(
-                f"--translators: {err} (--model {a.model},"
-                f" --start-domain {a.start_domain or a.domain})"
-            )
+            p.error(f"--translators: {err} (--model {a.model}, --start-domain {start_domain})")
     enable_compilation_cache()
     out = Path(a.out)
     out.mkdir(parents=True, exist_ok=True)
@@ -320,7 +318,7 @@ def start_stage(p: argparse.ArgumentParser, a, module: str, config: dict, argv) 
         "model": str(a.model),
         "model_hash": arm_c.model_hash,
         "domain": a.domain,
-        "start_domain": a.start_domain or a.domain,
+        "start_domain": start_domain,
         "method": module.rsplit(".", 1)[-1],
         "sources": [str(x) for x in a.translators],
         "seeds": seeds,
