@@ -490,9 +490,9 @@ def _new_history(arm_c, k: int, data: ImitationData) -> dict:
     the whole programs and over their first window_s of the teacher and of stretch only (the
     D_s commands held k periods): what the translator must approach, and what it must beat."""
     teacher_whole = float(data.teacher_val_x_err_cm.mean())
-    head, _ = window_and_whole_x_err_cm(arm_c, data.c_val, k, data.x_val, data.window)
-    stretch_head, stretch_whole = window_and_whole_x_err_cm(
-        arm_c, data.p_val, k, data.x_val, data.window
+    # The teacher's and stretch only's commands in one MuJoCo C batch.
+    (head, stretch_head), (_, stretch_whole) = window_and_whole_x_err_cm(
+        arm_c, np.stack([data.c_val, data.p_val]), k, data.x_val, data.window
     )
     return {
         "train_loss": [],
