@@ -22,8 +22,7 @@ import numpy as np
 import mjx_arm
 from bench import run_header, write_results
 from ccgan.cli import cli_parser
-from ccgan.distill import DistillConfig, held_out_programs
-from tracking import held, metrics
+from ccgan.distill import DistillConfig, held_out_programs, window_and_whole_x_err_cm
 
 
 def stretch_only_cm(run: dict) -> float:
@@ -39,8 +38,8 @@ def stretch_only_cm(run: dict) -> float:
             f"{run['model']} is now the arm {arm_c.model_hash}; the run was on {run['model_hash']}"
         )
     targets = arm_s.rollout(programs, backend="c")
-    poses = held.run_dc(arm_c, held.stretch(programs, k), k, "c")
-    return float(metrics.position_error_cm(poses, targets).mean())
+    _, whole = window_and_whole_x_err_cm(arm_c, programs, k, targets, window=1)
+    return float(whole)
 
 
 def row(folder: Path, run: dict, stretch_cm: float, stretch_source: str) -> dict:
