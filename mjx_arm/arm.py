@@ -31,6 +31,8 @@ from mjx_arm.machine import usable_cores
 
 #: A trajectory whose joint speed exceeds this (rad/s or m/s) is treated as diverged.
 MAX_JOINT_SPEED = 1.0e3
+#: jax_default_matmul_precision of every MJX physics step (see `control_period`).
+MJX_MATMUL_PRECISION = "highest"
 #: Trajectories per MuJoCo C `mujoco.rollout` call in `Arm.rollout`: each call holds every
 #: substep's full state of a 5 s slice ([chunk, 1250, nstate] float64, with its copies and the
 #: controls, 43 per substep with stretch softening). Measured peak for the committed arm:
@@ -501,11 +503,15 @@ def control_period(
     timestep = mjx_model.opt.timestep
 
     def physics_step(data, pressure):
-        if controls is None:
-            data = data.replace(ctrl=data.ctrl.at[actuators].set(pressure))
-        else:
-            data = data.replace(ctrl=controls.jax(data.ctrl, pressure))
-        return mjx.step(mjx_model, data), None
+        # Full float32 matrix products: JAX's default lets XLA use TensorFloat32 (10-bit
+        # mantissa) on NVIDIA GPUs, which made the k = 20 tracker 9.4x coarser than MuJoCo C on
+        # an H100 at no gain in speed (bench/results/h100/teacher_k20.md). No effect on CPUs.
+        with jax.default_matmul_precision(MJX_MATMUL_PRECISION):
+            if controls is None:
+                data = data.replace(ctrl=data.ctrl.at[actuators].set(pressure))
+            else:
+                data = data.replace(ctrl=controls.jax(data.ctrl, pressure))
+            return mjx.step(mjx_model, data), None
 
     def control_step(carry, command):
         data, pressure, healthy = carry

@@ -23,6 +23,9 @@
 #   starts from the same D_c CCGAN-GP (--start-domain constrained), the teacher tracks in the
 #   aged arm.
 #   BUDGET_S=S (default 570) is what one invocation may use of a call: two in one call share it.
+#   3b/4b'. bash studies/issue30_gpu.sh pair teacher|distill K1 K2 [the same flags]
+#      step 3 or 4 for two hold factors at once on the one GPU (no preallocation), each
+#      logging to its folder's stage.log.
 #   5. bash studies/issue30_gpu.sh length K [studies.program_length flags]
 #      the distilled translators, their teacher and stretch only on held-out 60 s programs.
 set -uo pipefail
@@ -79,6 +82,21 @@ rerun)
   distill "$RUN/distill_k${k}_run2" "$k" "$@"
   pack
   ;;
+pair)
+  # two stages at once on the one GPU, each logging to its folder's stage.log; what a teacher
+  # costs beside another is in the logs' per-25-step times (bench/device/teacher_sharing.sh)
+  stage=$2 k1=$3 k2=$4
+  shift 4
+  [[ $stage == teacher ]] && set -- --teacher-only "$@"
+  export XLA_PYTHON_CLIENT_PREALLOCATE=false # two processes share the GPU's memory
+  for k in "$k1" "$k2"; do
+    mkdir -p "$RUN/$PREFIX$k${SUFFIX:-}"
+    distill "$RUN/$PREFIX$k${SUFFIX:-}" "$k" "$@" >>"$RUN/$PREFIX$k${SUFFIX:-}/stage.log" 2>&1 &
+  done
+  wait
+  tail -n 3 "$RUN/$PREFIX$k1${SUFFIX:-}/stage.log" "$RUN/$PREFIX$k2${SUFFIX:-}/stage.log"
+  pack
+  ;;
 length)
   k=$2
   shift 2
@@ -87,7 +105,7 @@ length)
   pack
   ;;
 *)
-  echo "usage: bash studies/issue30_gpu.sh install|bench|teacher|distill|rerun|length ..." >&2
+  echo "usage: bash studies/issue30_gpu.sh install|bench|teacher|distill|pair|rerun|length ..." >&2
   exit 2
   ;;
 esac

@@ -215,6 +215,7 @@ def test_mjx_teacher_plans_in_shards_as_the_c_teacher(arms, tmp_path):
     np.testing.assert_allclose(again["c_val"][:1], data["c_val"], atol=0.01)
     with np.load(cache) as f:
         assert '"teacher_backend": "mjx"' in str(f["key"])
+        assert '"mjx_matmul_precision": "highest"' in str(f["key"])
     on_c = distill.teacher_data(one_step, arm_s, arm_c, k, tmp_path / "c.npz", log=logs.append)
     np.testing.assert_array_equal(on_c["p_train"], data["p_train"])
     np.testing.assert_allclose(

@@ -26,7 +26,7 @@ from pathlib import Path
 
 import numpy as np
 
-from mjx_arm.arm import Arm
+from mjx_arm.arm import MJX_MATMUL_PRECISION, Arm
 from mjx_arm.atomic import write_atomically
 from tracking.mpc import LINE_STEPS, MpcConfig, _batched
 
@@ -106,6 +106,11 @@ def _planner(arm_c: Arm, k: int, cfg: MpcConfig):
         return new_carry, x, cost
 
     def advance(mjx_model, carry, x0, target):
+        # The Gauss-Newton algebra at full float32 too, as the physics (MJX_MATMUL_PRECISION).
+        with jax.default_matmul_precision(MJX_MATMUL_PRECISION):
+            return _advance(mjx_model, carry, x0, target)
+
+    def _advance(mjx_model, carry, x0, target):
         def step(carry, inputs):
             x0_n, target_n = inputs
             carry, applied, cost = jax.vmap(plan_one, in_axes=(None, 0, 0, 0))(
@@ -135,7 +140,7 @@ class TrackingStopped(RuntimeError):
 def _fingerprint(arm_c: Arm, k: int, cfg: MpcConfig, init, target, chunk_steps: int) -> str:
     """What a resume file must match: the arm, k, the settings, the inputs and the chunking."""
     h = hashlib.sha256()
-    h.update(repr((arm_c.model_hash, k, cfg, chunk_steps)).encode())
+    h.update(repr((arm_c.model_hash, k, cfg, chunk_steps, MJX_MATMUL_PRECISION)).encode())
     for a in (init, target):
         h.update(repr(a.shape).encode())
         h.update(np.ascontiguousarray(a).tobytes())
