@@ -22,6 +22,9 @@
 #   DOMAIN=aged before steps 3 and 4 distills for the aged arm (stiffness x0.7) in aged_kK: G_c
 #   starts from the same D_c CCGAN-GP (--start-domain constrained), the teacher tracks in the
 #   aged arm.
+#   TEACHER_FROM=FILE before steps 3-4 starts the folder with that teacher cache (a teacher.npz
+#   brought back from an earlier machine, in pieces: the device returns files of a few MB, and
+#   carried in an ignored folder such as .teacher_cache/): a fresh machine need not replan it.
 #   BUDGET_S=S (default 570) is what one invocation may use of a call: two in one call share it.
 #   3b/4b'. bash studies/issue30_gpu.sh pair teacher|distill K1 K2 [the same flags]
 #      step 3 or 4 for two hold factors at once on the one GPU (no preallocation), each
@@ -49,6 +52,9 @@ PREFIX=distill_k
 distill() { # distill() OUT_DIR K [--teacher-only] [ccgan.distill flags]
   local out=$1 k=$2
   shift 2
+  if [[ -n ${TEACHER_FROM:-} ]]; then # a teacher cache carried from an earlier machine
+    mkdir -p "$out" && cp --update=none "$TEACHER_FROM" "$out/teacher.npz" || return 1
+  fi
   timeout "$(left)" $PY -m ccgan.distill --model $MODEL --domain "$DOMAIN" \
     --start-domain constrained \
     --translators $START/translator_seed{0,1,2}.ckpt --seeds 0 1 2 --hold-factor "$k" \
