@@ -11,8 +11,8 @@ Methods:
            asked for (--ccgan-path etc.) must load, or the run stops before any work.
   ccgan_sim  the CCGAN-GP translator fine-tuned in the simulator (`ccgan.finetune` through the
            MJX rollout, then `ccgan.distill` by imitation of `tracking.mpc`; docs/training.md):
-           results/paper/run/ccgan_sim/translator.ckpt or --ccgan-sim-path; not in the
-           default methods.
+           results/paper/run/ccgan_sim/translator.ckpt or --ccgan-sim-path; the project's
+           best translator, so the main job shows it beside CCGAN-GP and stretch only.
   wcgan    the WCGAN-GP baseline translator: a translator checkpoint given by --wcgan-path or
            found at results/paper/run/wcgan/translator.ckpt.
   mpc      receding-horizon tracking in the D_c simulator itself (`tracking.mpc.track`, MuJoCo C,
@@ -52,7 +52,7 @@ from tracking.held import stretch
 
 METHODS = ("none", "stretch", "ccgan", "ccgan_sim", "wcgan", "mpc", "oracle")
 #: What runs without --methods (the oracle is left out on CPU).
-DEFAULT_METHODS = ("none", "stretch", "ccgan", "wcgan", "oracle")
+DEFAULT_METHODS = ("none", "stretch", "ccgan", "ccgan_sim", "wcgan", "oracle")
 TRANSLATOR_METHODS = ("ccgan", "ccgan_sim", "wcgan")
 #: Where the simulator-fine-tuned CCGAN-GP is looked for when no path is given.
 CCGAN_SIM_DEFAULT_PATH = TRANSLATORS_DIR / "ccgan_sim" / "translator.ckpt"

@@ -30,6 +30,8 @@ import mujoco
 import numpy as np
 from PIL import Image, ImageDraw, ImageFont
 
+from eval.plots import LABELS
+
 #: The D_s target tip path (drawn up to the current frame) and the target's current point.
 GREEN = np.array([0.1, 0.85, 0.2, 1.0], dtype=np.float32)
 #: The panel's own tip path and its current tip.
@@ -425,24 +427,35 @@ def _ensure_ffmpeg() -> None:
         mediapy.set_ffmpeg(imageio_ffmpeg.get_ffmpeg_exe())
 
 
+#: The translated panel's method: the first of these a run has (the best translator first).
+VIDEO_BEST = ("ccgan_sim", "ccgan", "wcgan", "oracle", "stretch")
+#: D_c panels of a video at most (each costs as much rendering as the D_s panel).
+VIDEO_DC_PANELS = 3
+
+
 def video_plan(traj: dict, cfg) -> tuple[np.ndarray, list[str]]:
     """(source steps [F] shown as frames, D_c panels' methods) of one shape's video.
 
-    The translated panel uses the first available translator, else the oracle, else stretch;
-    the untranslated panel follows it.
+    The D_c panels, left to right: the best translator the run has (`VIDEO_BEST`), then
+    CCGAN-GP and stretch only where the run has them and they are not that one, then the
+    untranslated program while there is room (`VIDEO_DC_PANELS`). The main job's videos show
+    the distilled translator, CCGAN-GP and stretch only beside the D_s arm.
     """
     n_steps = traj["pressures_s"].shape[0]
     frame_every = max(1, int(round(10.0 * cfg.video_speedup / cfg.video_fps)))
     frames_at = np.arange(frame_every - 1, n_steps, frame_every)
-    translated = next(
-        (m for m in ("ccgan", "wcgan", "oracle", "stretch") if m in traj["commands"]), None
-    )
-    methods = [m for m in (translated, "none") if m is not None and m in traj["commands"]]
+    have = traj["commands"]
+    best = next((m for m in VIDEO_BEST if m in have), None)
+    methods = []
+    for m in (best, "ccgan", "stretch", "none"):
+        if m is not None and m in have and m not in methods and len(methods) < VIDEO_DC_PANELS:
+            methods.append(m)
     return frames_at, methods
 
 
 def video_frames(arm_s, arm_c, traj: dict, cfg, mark: str | None = None, on_frame=None):
-    """Frames [F, H, 3 W, 3] uint8 of one shape's video (`write_video`)."""
+    """Frames [F, H, P W, 3] uint8 of one shape's video (`write_video`): P = 1 + the D_c
+    panels of `video_plan`."""
     from mjx_arm import programs
 
     frames_at, methods = video_plan(traj, cfg)
@@ -457,7 +470,7 @@ def video_frames(arm_s, arm_c, traj: dict, cfg, mark: str | None = None, on_fram
         qpos_c, poses_c = replay(arm_c, traj["commands"][method])
         n = min(len(frames_at), poses_c.shape[0] // k)
         at = (frames_at[:n] + 1) * k - 1
-        label = "D_c untranslated" if method == "none" else f"D_c {method}"
+        label = f"D_c {LABELS.get(method, method)}"
         panels.append((arm_c, label, qpos_c[at], poses_c[at, :3]))
     hw = cfg.video_panel_hw
     tips = np.concatenate([target] + [p for _, _, _, p in panels if p is not None])
@@ -480,7 +493,7 @@ def video_frames(arm_s, arm_c, traj: dict, cfg, mark: str | None = None, on_fram
 def write_video(
     arm_s, arm_c, traj: dict, cfg, path: Path, mark: str | None = None, on_frame=None
 ) -> Path:
-    """Three-panel MP4 for one shape: D_s | D_c translated | D_c untranslated (`video_plan`).
+    """MP4 for one shape: D_s | the D_c panels of `video_plan` (the best translator first).
 
     D_c panels are sampled at the end of each source step's k periods, so all panels share the
     source time axis, and one camera (`frame_camera`). `mark` (a quick run's,

@@ -64,7 +64,7 @@ METHOD_NAMES = {
     "none": "untranslated",
     "stretch": "stretch only",
     "ccgan": "CCGAN-GP",
-    "ccgan_sim": "CCGAN-GP + sim fine-tune",
+    "ccgan_sim": "CCGAN-GP refined in the simulator",
     "wcgan": "WCGAN-GP",
     "mpc": "MPC in the D_c simulator",
     "oracle": "the oracle",

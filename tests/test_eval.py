@@ -110,7 +110,12 @@ def test_tiny_end_to_end(small_xml, tmp_path, capsys):
     meta = next(frames)
     w, h = meta["size"]
     first = np.frombuffer(next(frames), np.uint8).reshape(h, w, 3)
-    assert w == 3 * 128 and h == 96
+    # D_s beside the D_c panels: the best translator run, stretch only, untranslated.
+    shown = render.video_plan(
+        {"pressures_s": np.zeros((20, 3)), "commands": dict.fromkeys(results["methods_run"])}, cfg
+    )[1]
+    assert shown[1:] == ["stretch", "none"] and shown[0] in ("ccgan", "wcgan")
+    assert w == (1 + len(shown)) * 128 and h == 96
     assert first.std() > 5.0  # not a blank frame
     assert (tmp_path / "shape_circle.png").exists()
     # Every long job shows a progress bar (on stderr).

@@ -189,3 +189,19 @@ def test_panel_size_may_be_square_but_not_empty():
     for bad in ((0, 480), (480,), (480.0, 480)):
         with pytest.raises(ConfigError, match="video_panel_hw"):
             pipeline.EvalConfig(video_panel_hw=bad)
+
+
+def test_video_plan_puts_the_best_translator_first():
+    """The main job's videos: the distilled translator, CCGAN-GP and stretch only beside D_s; a
+    run without the distilled translator shows CCGAN-GP first; room left goes to untranslated."""
+    cfg = pipeline.EvalConfig()
+    p = np.zeros((30, 3))
+    every = ("none", "stretch", "ccgan", "ccgan_sim", "wcgan", "oracle")
+
+    def plan(methods):
+        return render.video_plan({"pressures_s": p, "commands": dict.fromkeys(methods)}, cfg)[1]
+
+    assert plan(every) == ["ccgan_sim", "ccgan", "stretch"]
+    assert plan(("none", "stretch", "ccgan", "wcgan")) == ["ccgan", "stretch", "none"]
+    assert plan(("none", "stretch", "wcgan")) == ["wcgan", "stretch", "none"]
+    assert plan(("none", "stretch")) == ["stretch", "none"]
