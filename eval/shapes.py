@@ -94,6 +94,7 @@ FLAGS = {
     "backend": "--backend",
     "duration_s": "--duration",
     "hold_factors": "--hold-factors",
+    "robust_methods": "--robust-methods",
     "model_path": "--model",
     "target_domain": "--target-domain",
     **{f"{method}_path": flag for method, flag in PATH_FLAGS.items()},
@@ -190,6 +191,14 @@ def _add_run_options(p: argparse.ArgumentParser) -> None:
         f" into a new {RUNS_DIR}/quick-<time>/ unless --out; marked on every plot and in shapes.md",
     )
     p.add_argument("--no-robustness", action="store_true", help="skip noise/periodicity tests")
+    p.add_argument(
+        "--robust-methods",
+        nargs="+",
+        metavar="METHOD",
+        default=list(EvalConfig.robust_methods),
+        help="methods of the noise and periodicity tests, where run (of stretch and the"
+        " translators; ccgan_sim adds about 15 min on 2 cores)",
+    )
 
 
 def _add_arm_options(p: argparse.ArgumentParser) -> None:
@@ -296,6 +305,7 @@ def parse_args(argv: list[str] | None = None) -> EvalConfig:
             hold_factors=tuple(a.hold_factors),
             render=a.render,
             robustness=not a.no_robustness,
+            robust_methods=tuple(a.robust_methods),
             out_dir=a.out,
             model_path=a.model,
             ccgan_path=a.ccgan_path,

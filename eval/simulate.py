@@ -20,7 +20,6 @@ from tqdm import tqdm
 
 import mjx_arm  # (before jax: sets the XLA CPU flag)
 from eval.methods import (
-    TRANSLATOR_METHODS,
     TranslatorMethod,
     forward_model,
     method_commands,
@@ -140,7 +139,7 @@ class Plan:
     @property
     def robust_methods(self) -> list[str]:
         """Methods of the noise and periodicity tests (none when cfg.robustness is off)."""
-        chosen = ("stretch", *TRANSLATOR_METHODS)
+        chosen = self.cfg.robust_methods
         return [m for m in chosen if m in self.methods and self.cfg.robustness]
 
 

@@ -136,6 +136,8 @@ def test_figures_of_a_quick_run_carry_the_mark(tmp_path):
         (["--hold-factors", "0"], "--hold-factors", ">= 1, got (0,)"),
         (["--hold-factors", "5", "5"], "--hold-factors", "distinct"),
         (["--methods", "bogus"], "--methods", "invalid choice"),
+        (["--robust-methods", "none"], "--robust-methods", "distinct ones of"),
+        (["--robust-methods", "ccgan", "ccgan"], "--robust-methods", "distinct"),
         (["--shapes", "square"], "--shapes", "invalid choice"),
         (["--duration", "0"], "--duration", "at least one 0.1 s command"),
         (["--duration", "-5"], "--duration", "at least one 0.1 s command"),
@@ -472,3 +474,24 @@ def test_committed_translators_are_labelled_for_their_stage(target, paths):
     for method in paths:
         tr, why = methods.load_translator(method, cfg)
         assert tr.model_hashes == {arm_hash} and sorted(tr.trained_seeds) == [0, 1, 2], why
+
+
+def test_the_robustness_tests_leave_out_the_distilled_translator_unless_asked(in_tmp):
+    """The main job scores ccgan_sim in its table, plots and videos but not in the noise and
+    periodicity tests, which would take it past 20 min on 2 cores; --robust-methods adds it."""
+    from eval import simulate
+
+    every = ("none", "stretch", "ccgan", "ccgan_sim", "wcgan")
+    default = dataclasses.replace(shapes.parse_args([]), methods=every)
+    asked = dataclasses.replace(
+        shapes.parse_args(["--robust-methods", "ccgan_sim", "stretch"]), methods=every
+    )
+    off = dataclasses.replace(shapes.parse_args(["--no-robustness"]), methods=every)
+
+    def robust(cfg):
+        plan = simulate.Plan(cfg, None, None, {}, list(every), 15, {}, {}, {}, None)
+        return plan.robust_methods
+
+    assert robust(default) == ["stretch", "ccgan", "wcgan"]
+    assert robust(asked) == ["ccgan_sim", "stretch"]
+    assert robust(off) == []
