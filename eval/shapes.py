@@ -142,7 +142,7 @@ def _add_run_options(p: argparse.ArgumentParser) -> None:
         metavar="METHOD",
         help=f"methods to score, of {', '.join(METHODS)} (default: "
         + " ".join(DEFAULT_METHODS)
-        + ", less the oracle on"
+        + ", less the oracle and WCGAN-GP on"
         " a CPU)",
     )
     p.add_argument(
@@ -197,7 +197,7 @@ def _add_run_options(p: argparse.ArgumentParser) -> None:
         metavar="METHOD",
         default=list(EvalConfig.robust_methods),
         help="methods of the noise and periodicity tests, where run (of stretch and the"
-        " translators; ccgan_sim adds about 15 min on 2 cores)",
+        " translators; stretch and ccgan_sim each add minutes on 2 cores)",
     )
 
 
@@ -326,8 +326,9 @@ def parse_args(argv: list[str] | None = None) -> EvalConfig:
         p.error(f"{FLAGS.get(err.field, err.field)} {err.problem}")
     if a.methods is None and "oracle" not in methods:
         print(
-            "NOTE: oracle left out by default on CPU (MJX gradients: ~8 min more on 2 cores"
-            " with --oracle-steps 10); add it with --methods ... oracle."
+            "NOTE: the oracle and WCGAN-GP are left out by default on CPU (the oracle's MJX"
+            " gradients: ~8 min more on 2 cores with --oracle-steps 10); add them with"
+            " --methods ... oracle wcgan."
         )
     return cfg
 

@@ -71,6 +71,7 @@ def test_tiny_end_to_end(small_xml, tmp_path, capsys):
         validation_duration_s=1.0,
         noise_stds=(0.1,),
         n_repeats=2,
+        robust_methods=("stretch", "ccgan", "wcgan"),
         render=True,
         out_dir=str(tmp_path),
         xml=small_xml,

@@ -492,6 +492,6 @@ def test_the_robustness_tests_leave_out_the_distilled_translator_unless_asked(in
         plan = simulate.Plan(cfg, None, None, {}, list(every), 15, {}, {}, {}, None)
         return plan.robust_methods
 
-    assert robust(default) == ["stretch", "ccgan", "wcgan"]
+    assert robust(default) == ["ccgan"]
     assert robust(asked) == ["ccgan_sim", "stretch"]
     assert robust(off) == []

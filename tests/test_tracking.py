@@ -187,3 +187,24 @@ def test_stretch_k_study_tries_what_eval_tries():
     from studies.stretch_k import CANDIDATES
 
     assert CANDIDATES == EvalConfig().hold_factors
+
+
+def test_grouped_rollouts_simulate_equal_commands_once(small_xml, monkeypatch):
+    """Equal (commands, k) jobs, such as a deterministic method's repetitions, are simulated once
+    and get the poses each job would get on its own; a job that differs is simulated apart."""
+    arm_c = mjx_arm.load(xml=small_xml, domain="constrained")
+    p = programs.validation_program(0.5)
+    other = p.copy()
+    other[2, 0] += 0.5
+    jobs = [(held.stretch(p, 2), 2), (held.stretch(other, 2), 2), (held.stretch(p, 2), 2)]
+    jobs += [(p, 1), (held.stretch(p, 2), 2)]
+    simulated = []
+    run_dc = held.run_dc
+    monkeypatch.setattr(
+        held, "run_dc", lambda arm, c, k, b: simulated.append(len(c)) or run_dc(arm, c, k, b)
+    )
+    got = held.rollout_grouped(arm_c, jobs, "c", progress="test")
+    assert sum(simulated) == 3  # the two different programs at k = 2, and the one at k = 1
+    for (commands, k), poses in zip(jobs, got, strict=True):
+        np.testing.assert_array_equal(poses, run_dc(arm_c, commands, k, "c"))
+    assert got[0] is not got[2] and got[0] is not got[4]  # copies, not one shared array

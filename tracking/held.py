@@ -9,6 +9,8 @@ periods, every k-th pose, is what is compared with the D_s target [T, 6].
 
 from __future__ import annotations
 
+import hashlib
+
 import numpy as np
 from tqdm import tqdm
 
@@ -44,20 +46,29 @@ def rollout_grouped(
     main job's 245 60 s trajectories at k = 10 take about 1.5 s each on 2 cores) and the poses
     are the same, as every trajectory is simulated on its own. MJX keeps one call per group
     (another batch size would compile again).
+
+    Jobs with equal commands and k are simulated once and share the poses (copies): the
+    simulator is deterministic and every trajectory runs on its own, so a deterministic method's
+    repetitions (the periodicity test) and its seeds cost one rollout.
     """
-    groups: dict[tuple, list[int]] = {}
+    groups: dict[tuple, dict[bytes, list[int]]] = {}
     for i, (cmd, k) in enumerate(jobs):
-        groups.setdefault((np.shape(cmd), int(k)), []).append(i)
+        cmd = np.ascontiguousarray(cmd, dtype=np.float64)
+        same = groups.setdefault((cmd.shape, int(k)), {})
+        same.setdefault(hashlib.sha256(cmd.tobytes()).digest(), []).append(i)
     out: list[np.ndarray | None] = [None] * len(jobs)
-    batch = 2 * usable_cores() if progress and backend == "c" else len(jobs)
     with tqdm(total=len(jobs), desc=progress, unit="traj", disable=not progress) as bar:
-        for (_, k), index in groups.items():
+        for (_, k), same in groups.items():
+            index = [copies[0] for copies in same.values()]
+            copies_of = {copies[0]: copies for copies in same.values()}
+            batch = 2 * usable_cores() if progress and backend == "c" else len(index)
             for start in range(0, len(index), max(batch, 1)):
                 part = index[start : start + batch]
                 poses = run_dc(arm, np.stack([jobs[i][0] for i in part]), k, backend)
-                for i, p in zip(part, poses, strict=True):
-                    out[i] = p
-                bar.update(len(part))
+                for first, p in zip(part, poses, strict=True):
+                    for n, i in enumerate(copies_of[first]):
+                        out[i] = p if n == 0 else p.copy()
+                bar.update(sum(len(copies_of[first]) for first in part))
     return out
 
 
