@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import time
 
-import mjx_arm  # noqa: F401  (before jax: sets the XLA CPU flag)
+import mjx_arm  # (before jax: sets the XLA CPU flag)
 from bench import run_header, write_results
 from ccgan.cli import cli_parser
 from mjx_arm.machine import usable_cores
@@ -25,8 +25,6 @@ from tracking import held, metrics, mpc, mpc_mjx
 
 
 def main(argv=None) -> None:
-    import jax
-
     p = cli_parser("bench.teacher", __doc__)
     p.add_argument("--model", default="models/softarm.xml", help="the arm's MJCF")
     p.add_argument("--k", type=int, default=15, help="control periods each command is held")
@@ -41,7 +39,8 @@ def main(argv=None) -> None:
         nargs="+",
         default=["default"],
         choices=["default", "highest"],
-        help="jax_default_matmul_precision of the MJX tracker, one row set each: 'default' lets"
+        help="matrix-product precision of the MJX tracker (mjx_arm.arm.MJX_MATMUL_PRECISION,"
+        " the package's 'highest' otherwise), one row set each: 'default' is JAX's, which lets"
         " XLA use TensorFloat32 for float32 products on NVIDIA GPUs since Ampere, 'highest'"
         " keeps them float32 (no difference on the CPU)",
     )
@@ -66,10 +65,14 @@ def main(argv=None) -> None:
     for precision in a.matmul_precisions:
         name = "MJX" if precision == "default" else f"MJX, matmul precision {precision}"
         for n in sorted(a.mjx_programs):
-            with jax.default_matmul_precision(None if precision == "default" else precision):
+            package = mjx_arm.arm.MJX_MATMUL_PRECISION
+            mjx_arm.arm.MJX_MATMUL_PRECISION = None if precision == "default" else precision
+            try:
                 commands, info = mpc_mjx.track(
                     arm_c, targets[:n], a.k, programs[:n], cfg, progress=True
                 )
+            finally:
+                mjx_arm.arm.MJX_MATMUL_PRECISION = package
             rows.append(
                 {
                     "backend": name,

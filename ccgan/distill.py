@@ -57,7 +57,7 @@ from ccgan.stage import (
     validated_loop,
 )
 from ccgan.translator import Translator
-from mjx_arm.arm import MJX_MATMUL_PRECISION
+from mjx_arm import arm as mjx_arm_arm
 from mjx_arm.atomic import write_atomically
 from mjx_arm.babble import BabbleConfig
 from mjx_arm.programs import babble_programs, shape_like_programs
@@ -187,7 +187,7 @@ class DistillConfig:
         if self.teacher_backend != "c":  # caches of the C teacher keep their key
             key["teacher_backend"] = self.teacher_backend
             # TensorFloat32 plans (before MJX_MATMUL_PRECISION) are not reused
-            key["mjx_matmul_precision"] = MJX_MATMUL_PRECISION
+            key["mjx_matmul_precision"] = mjx_arm_arm.MJX_MATMUL_PRECISION
         return key
 
 

@@ -117,9 +117,10 @@ class EvalConfig:
     """Run the noise and periodicity tests."""
     robust_methods: tuple[str, ...] = ("ccgan",)
     """Methods of the noise and periodicity tests, where run: the paper's tests are of its
-    CCGAN-GP. Each method adds up to 14 rollouts per shape (noise draws per seed, repetitions),
-    and at k = 15 one 60 s rollout takes about 3.5 s on 2 cores: stretch only and the distilled
-    translator would add about 3 and 4 min to the main job. The chain's tables ask for them."""
+    CCGAN-GP. Each method adds up to 14 rollouts per shape (noise draws per seed, repetitions);
+    with the tests of stretch only and WCGAN-GP as well (and every rollout simulated), the main
+    job took 16 min from a fresh clone on 2 cores (bench/results/cpu/main_job_fresh_clone.md).
+    The chain's tables ask for every method's."""
     render: bool = False
     """Write MP4 videos."""
     out_dir: str | None = None

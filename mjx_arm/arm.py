@@ -31,7 +31,8 @@ from mjx_arm.machine import usable_cores
 
 #: A trajectory whose joint speed exceeds this (rad/s or m/s) is treated as diverged.
 MAX_JOINT_SPEED = 1.0e3
-#: jax_default_matmul_precision of every MJX physics step (see `control_period`).
+#: jax_default_matmul_precision of every MJX physics step and of the MJX tracker
+#: (`mjx_precision`; None: JAX's default, TensorFloat32 on NVIDIA GPUs, for benchmarks).
 MJX_MATMUL_PRECISION = "highest"
 #: Trajectories per MuJoCo C `mujoco.rollout` call in `Arm.rollout`: each call holds every
 #: substep's full state of a 5 s slice ([chunk, 1250, nstate] float64, with its copies and the
@@ -483,6 +484,12 @@ def rollout_program(
     return poses, ok
 
 
+def mjx_precision():
+    """The matrix-product precision of MJX code, as a context: `MJX_MATMUL_PRECISION`, read
+    here, when the code is traced, so that `bench.teacher` can set the module attribute."""
+    return jax.default_matmul_precision(MJX_MATMUL_PRECISION)
+
+
 def control_period(
     mjx_model: mjx.Model,
     *,
@@ -506,7 +513,7 @@ def control_period(
         # Full float32 matrix products: JAX's default lets XLA use TensorFloat32 (10-bit
         # mantissa) on NVIDIA GPUs, which made the k = 20 tracker 9.4x coarser than MuJoCo C on
         # an H100 at no gain in speed (bench/results/h100/teacher_k20.md). No effect on CPUs.
-        with jax.default_matmul_precision(MJX_MATMUL_PRECISION):
+        with mjx_precision():
             if controls is None:
                 data = data.replace(ctrl=data.ctrl.at[actuators].set(pressure))
             else:

@@ -256,3 +256,22 @@ def test_mjx_physics_asks_for_full_float32_matrix_products(small_xml):
     precisions = _dot_precisions(jaxpr)
     highest = (jax.lax.Precision.HIGHEST, jax.lax.Precision.HIGHEST)
     assert precisions and all(p == highest for p in precisions), set(precisions)
+
+
+def test_mjx_precision_is_one_setting_a_benchmark_can_lower(small_xml, monkeypatch):
+    """`bench.teacher --matmul-precisions default` sets `MJX_MATMUL_PRECISION` to None: the
+    period then traces with the caller's precision, as JAX's default would on a GPU."""
+    import jax
+    import jax.numpy as jnp
+    from mujoco import mjx
+
+    from mjx_arm import arm as arm_module
+
+    monkeypatch.setattr(arm_module, "MJX_MATMUL_PRECISION", None)
+    arm = mjx_arm.load(xml=small_xml)
+    data = mjx.make_data(arm.mjx_model)
+    carry = (data, jnp.zeros(3, jnp.float32), jnp.array(True))
+    with jax.default_matmul_precision("bfloat16"):
+        jaxpr = jax.make_jaxpr(arm.period_fn(arm.mjx_model))(carry, jnp.ones(3, jnp.float32))
+    precisions = set(_dot_precisions(jaxpr.jaxpr))
+    assert (jax.lax.Precision.HIGHEST, jax.lax.Precision.HIGHEST) not in precisions, precisions

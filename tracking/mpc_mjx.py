@@ -26,7 +26,8 @@ from pathlib import Path
 
 import numpy as np
 
-from mjx_arm.arm import MJX_MATMUL_PRECISION, Arm
+from mjx_arm import arm as mjx_arm_arm
+from mjx_arm.arm import Arm
 from mjx_arm.atomic import write_atomically
 from tracking.mpc import LINE_STEPS, MpcConfig, _batched
 
@@ -106,8 +107,8 @@ def _planner(arm_c: Arm, k: int, cfg: MpcConfig):
         return new_carry, x, cost
 
     def advance(mjx_model, carry, x0, target):
-        # The Gauss-Newton algebra at full float32 too, as the physics (MJX_MATMUL_PRECISION).
-        with jax.default_matmul_precision(MJX_MATMUL_PRECISION):
+        # The Gauss-Newton algebra at the physics' precision (full float32 by default).
+        with mjx_arm_arm.mjx_precision():
             return _advance(mjx_model, carry, x0, target)
 
     def _advance(mjx_model, carry, x0, target):
@@ -140,7 +141,8 @@ class TrackingStopped(RuntimeError):
 def _fingerprint(arm_c: Arm, k: int, cfg: MpcConfig, init, target, chunk_steps: int) -> str:
     """What a resume file must match: the arm, k, the settings, the inputs and the chunking."""
     h = hashlib.sha256()
-    h.update(repr((arm_c.model_hash, k, cfg, chunk_steps, MJX_MATMUL_PRECISION)).encode())
+    precision = mjx_arm_arm.MJX_MATMUL_PRECISION
+    h.update(repr((arm_c.model_hash, k, cfg, chunk_steps, precision)).encode())
     for a in (init, target):
         h.update(repr(a.shape).encode())
         h.update(np.ascontiguousarray(a).tobytes())
@@ -190,7 +192,7 @@ _PLANNERS: dict = {}
 def _cached_planner(arm_c: Arm, k: int, cfg: MpcConfig):
     """`_planner`, built once per arm, k and settings in a process: a second call (the next
     shard of a teacher) reuses the compiled program instead of tracing it again."""
-    key = (id(arm_c), k, cfg)
+    key = (id(arm_c), k, cfg, mjx_arm_arm.MJX_MATMUL_PRECISION)  # traced with that precision
     if key not in _PLANNERS:  # the arm is kept with it, so that its id is not reused
         _PLANNERS[key] = (arm_c, _planner(arm_c, k, cfg))
     return _PLANNERS[key][1]
