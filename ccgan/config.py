@@ -80,6 +80,11 @@ class TrainConfig:
     #: never counts). Training oscillates: the best scored epochs were 20-40 of 80
     #: (docs/ccgan_study.md).
     keep_best: bool = True
+    #: With keep_best: stop training once this many scorings in a row (every `stretch_every`
+    #: epochs) gave no seed a lower held-out error, and write the best iterates; `epochs` is
+    #: then the most it trains. 0 trains every epoch. The chain's CCGAN-GP seeds kept epochs
+    #: 20-40 of 80 (docs/ccgan_study.md): the epochs after them cost GPU time for nothing.
+    patience: int = 0
     #: Seconds of each held-out program simulated when k_choice is "simulator" (0 = whole
     #: programs; the authors' code uses one 30 s program).
     k_choice_seconds: float = 20.0
@@ -154,6 +159,7 @@ class TrainConfig:
                 "lambda_gp": 0,
                 "hold_factors": 1,
                 "stretch_every": 1,
+                "patience": 0,
                 "val_window_length": 0,
                 "k_choice_seconds": 0,
                 "k_choice_n_programs": 1,
@@ -177,6 +183,12 @@ class TrainConfig:
         if self.k_choice_programs == "shape_like" and not self.k_choice_seconds:
             raise ConfigError(
                 "k_choice_seconds", "must be > 0 with k_choice_programs shape_like (their length)"
+            )
+        if self.patience and not (self.keep_best and self.k_choice == "simulator"):
+            raise ConfigError(
+                "patience",
+                "needs keep_best and k_choice 'simulator' (it stops on their held-out scores),"
+                f" got keep_best={self.keep_best}, k_choice={self.k_choice!r}",
             )
         if self.feedback_impl not in FEEDBACK_IMPLS:
             retired = (

@@ -36,6 +36,8 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import json
+import os
+import shutil
 import signal
 import sys
 import threading
@@ -257,6 +259,41 @@ def held_out_programs(config: DistillConfig) -> np.ndarray:
     )
 
 
+def teacher_cache_key(config: DistillConfig, k: int, model_hash: str) -> str:
+    """The key a teacher cache (`teacher.npz`) is stored under: the settings its commands
+    depend on, k and the arm; a cache under another key is planned again."""
+    return json.dumps(config.teacher_key() | {"k": k, "model": model_hash}, sort_keys=True)
+
+
+def adopt_teacher(source: Path, cache: Path, key: str) -> bool:
+    """Copies the teacher cache `source` (another run's `teacher.npz`, e.g. a chain stage that
+    only planned) to `cache`, unless `cache` exists already (this run's own, perhaps grown).
+    Returns whether it copied.
+
+    Raises:
+      ValueError: `source` is unreadable, or was planned under another key (other settings,
+        k or arm): using it would plan everything again, silently.
+    """
+    if cache.exists():
+        return False
+    try:
+        with np.load(source) as f:
+            stored = str(f["key"])
+    except (OSError, ValueError, KeyError) as err:
+        raise ValueError(f"{source} is not a teacher cache ({err})") from err
+    if stored != key:
+        raise ValueError(f"{source} was planned with other settings: {stored}, this run: {key}")
+    cache.parent.mkdir(parents=True, exist_ok=True)
+    tmp = cache.with_name(cache.name + ".tmp")
+    tmp.unlink(missing_ok=True)
+    try:  # a hard link: no second copy on disk or in a packed run folder; the cache is only
+        os.link(source, tmp)  # ever replaced whole (write_atomically), never written in place
+    except OSError:
+        shutil.copyfile(source, tmp)
+    tmp.replace(cache)
+    return True
+
+
 def teacher_data(
     config: DistillConfig,
     arm_s,
@@ -284,7 +321,7 @@ def teacher_data(
       "x_val" (m, unit d3), "c_train" [N, T, 3] and "c_val" (teacher commands per source step,
       bar), plus "teacher_val_x_err_cm" [n_val] (the teacher's own held-out X_err).
     """
-    key = json.dumps(config.teacher_key() | {"k": k, "model": arm_c.model_hash}, sort_keys=True)
+    key = teacher_cache_key(config, k, arm_c.model_hash)
     splits = _splits(config)
     store: dict[str, np.ndarray] = {}
     if cache is not None and cache.exists():
@@ -611,13 +648,21 @@ def distill(
 
 def build_parser() -> argparse.ArgumentParser:
     """The options of `python -m ccgan.distill`."""
-    p = stage_parser("ccgan.distill", __doc__)
+    p = stage_parser("ccgan.distill", __doc__, translators_required=False)
     add_config_flags(p, DistillConfig)
     p.add_argument(
         "--teacher-only",
         action="store_true",
         help="plan the teacher's commands into --out/teacher.npz and stop (a later run with the"
-        " same flags trains on them): to split a long run into calls",
+        " same flags trains on them): to split a long run into calls. Needs no --translators"
+        " when --hold-factor is given, so a chain can plan while its translators train",
+    )
+    p.add_argument(
+        "--teacher-from",
+        metavar="FILE",
+        help="start from the teacher cache FILE (the teacher.npz of a --teacher-only run with"
+        " the same settings, k and arm), copied into --out unless --out has its own; one"
+        " planned under other settings is refused",
     )
     return p
 
@@ -626,7 +671,11 @@ def main(argv=None) -> None:
     """CLI: `python -m ccgan.distill --translators A.ckpt [B.ckpt ...] --out DIR`."""
     p = build_parser()
     a = p.parse_args(argv)
+    if not a.translators and not a.teacher_only:
+        p.error("--translators is required (only --teacher-only plans without translators)")
     config = config_from_args(p, a, DistillConfig)
+    if not a.translators and config.hold_factor == 0:
+        p.error("--teacher-only without --translators needs --hold-factor (k)")
     stage = start_stage(p, a, "ccgan.distill", dataclasses.asdict(config), argv)
     stage.run["method"] = "distill"
     if config.hold_factor == 0:
@@ -634,6 +683,14 @@ def main(argv=None) -> None:
             common_k(stage.translators)
         except ValueError as err:
             p.error(f"{err}: give --hold-factor")
+    if a.teacher_from:
+        k = config.hold_factor or common_k(stage.translators)
+        key = teacher_cache_key(config, k, stage.arm_c.model_hash)
+        try:
+            if adopt_teacher(Path(a.teacher_from), stage.out / "teacher.npz", key):
+                print(f"teacher: started from {a.teacher_from}")
+        except ValueError as err:
+            p.error(f"--teacher-from: {err}")
 
     # SIGTERM (a time limit, experiments.stages at its deadline) stops the teacher after its
     # chunk of source steps (its progress kept) or training after its epoch (its best iterates

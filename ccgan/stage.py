@@ -184,11 +184,17 @@ def save_finetuned(path, source_path, g_c_params, finetune_meta: dict) -> Path:
     return checkpoint.save(path, tree, meta)
 
 
-def stage_parser(module: str, doc: str) -> argparse.ArgumentParser:
+def stage_parser(
+    module: str, doc: str, translators_required: bool = True
+) -> argparse.ArgumentParser:
     """A parser with the flags every fine-tune stage's CLI (`ccgan.finetune`, `ccgan.distill`)
-    has: --translators, --seeds, --out, --model, --domain; `start_stage` checks and loads them."""
+    has: --translators, --seeds, --out, --model, --domain; `start_stage` checks and loads them.
+    `translators_required` False leaves --translators to the CLI (`ccgan.distill --teacher-only`
+    plans without any)."""
     p = cli_parser(module, doc)
-    p.add_argument("--translators", nargs="+", required=True, help="translator checkpoints")
+    p.add_argument(
+        "--translators", nargs="+", required=translators_required, help="translator checkpoints"
+    )
     p.add_argument("--seeds", type=int, nargs="+", help="seed of each file (default 0, 1, ...)")
     p.add_argument("--out", required=True, help="output folder")
     p.add_argument(
@@ -276,17 +282,17 @@ def start_stage(p: argparse.ArgumentParser, a, module: str, config: dict, argv) 
 
     from mjx_arm.machine import cpu_model, enable_compilation_cache
 
-    seeds = a.seeds if a.seeds is not None else list(range(len(a.translators)))
-    if len(seeds) != len(a.translators):
+    paths = a.translators or []
+    seeds = a.seeds if a.seeds is not None else list(range(len(paths)))
+    if len(seeds) != len(paths):
         p.error("give one seed per translator file")
     if len(set(seeds)) != len(seeds):
         p.error(f"--seeds must be distinct, got {seeds}")
     check_output_dir(p, "--out", a.out)
     try:
-        sources = [checkpoint.load(path) for path in a.translators]  # read once, rewritten often
+        sources = [checkpoint.load(path) for path in paths]  # read once, rewritten often
         translators = [
-            translator_from_checkpoint(src, path)
-            for src, path in zip(sources, a.translators, strict=True)
+            translator_from_checkpoint(src, path) for src, path in zip(sources, paths, strict=True)
         ]
     except checkpoint.CheckpointError as err:
         p.error(f"--translators: {err}")
@@ -295,7 +301,7 @@ def start_stage(p: argparse.ArgumentParser, a, module: str, config: dict, argv) 
     except (FileNotFoundError, ValueError) as err:  # ModelValidationError is a ValueError
         p.error(f"--model {a.model}: {err}")
     start_domain = a.start_domain or a.domain
-    for path, (_, meta) in zip(a.translators, sources, strict=True):
+    for path, (_, meta) in zip(paths, sources, strict=True):
         try:
             check_labels(
                 meta,
@@ -320,7 +326,7 @@ def start_stage(p: argparse.ArgumentParser, a, module: str, config: dict, argv) 
         "domain": a.domain,
         "start_domain": start_domain,
         "method": module.rsplit(".", 1)[-1],
-        "sources": [str(x) for x in a.translators],
+        "sources": [str(x) for x in paths],
         "seeds": seeds,
     }
     return Stage(seeds, sources, translators, arm_s, arm_c, out, run)

@@ -195,20 +195,26 @@ def train_and_evaluate(
     done = int(np.asarray(state.epoch)[0])
     after_epoch = None
     best = None
+    settled = threading.Event()  # set once `config.patience` scorings gave no seed a new best
     if k_choice is not None and config.k_choice == "simulator":
         best = BestGenerators(workdir / "best_gen.ckpt", meta, len(seeds), resuming)
         after_epoch = _simulator_choice(
-            k_choice, config, seeds, choice_rows, choices_path, best if config.keep_best else None
-        )
+            k_choice, config, seeds, choice_rows, choices_path,
+            best if config.keep_best else None, settled,
+        )  # fmt: skip
         if not resuming:  # like the authors' code: once before training, untrained G_c
             state, _ = after_epoch(0, state, None)
+        elif best.settled(done, config):  # stopped early before, then resumed
+            settled.set()
     bar = tqdm(total=config.epochs, initial=done, unit="epoch", disable=not progress, desc="ccgan")
     record = _chunk_recorder(ckpt_path, csv_path, meta, seeds, rows, bar)
-    state = _run_chunks(
-        trainer, state, run_keys, config, done, max_chunks, record, stop, after_epoch
-    )
+    if not settled.is_set():
+        state = _run_chunks(
+            trainer, state, run_keys, config, done, max_chunks, record, stop, after_epoch,
+            settled,
+        )  # fmt: skip
     bar.close()
-    if int(np.asarray(state.epoch)[0]) >= config.epochs:
+    if int(np.asarray(state.epoch)[0]) >= config.epochs or settled.is_set():
         _save_translators(
             workdir,
             best.applied(state) if best is not None and config.keep_best else state,
@@ -277,6 +283,13 @@ class BestGenerators:
             },
         )
 
+    def settled(self, epochs_done: int, config: TrainConfig) -> bool:
+        """True when `config.patience` (> 0) scorings up to `epochs_done` gave no seed a lower
+        error than it had: the early stop of `train`."""
+        if not config.patience or self.gen is None:
+            return False
+        return epochs_done - int(self.epoch.max()) >= config.patience * config.stretch_every
+
     def applied(self, state):
         """`state` with each scored seed's best generators and k (others as they are)."""
         if self.gen is None:
@@ -292,14 +305,15 @@ class BestGenerators:
 
 
 def _simulator_choice(
-    k_choice, config: TrainConfig, seeds, rows: list[dict], path: Path, best=None
+    k_choice, config: TrainConfig, seeds, rows: list[dict], path: Path, best=None, settled=None
 ):
     """`after_epoch(epochs_done, state, metrics) -> (state, metrics)` for `_run_chunks`.
 
     After the epochs where k is due (every `stretch_every` and the last; 0 = before training),
     chooses each seed's k in the simulator, sets it in the state and in that epoch's metrics
     (k, val_error_cm), and appends one row per seed to `rows`, rewritten to `path`. With `best`
-    (a `BestGenerators`), each seed's generators at its lowest error are kept there.
+    (a `BestGenerators`), each seed's generators at its lowest error are kept there, and
+    `settled` (a `threading.Event`) is set once `best.settled` (config.patience).
     """
 
     def after_epoch(epochs_done: int, state, metrics):
@@ -317,6 +331,8 @@ def _simulator_choice(
         _write_rows(path, rows)
         if best is not None:
             best.update(epochs_done, state.params["gen"], choice.k, choice.error_cm)
+            if settled is not None and best.settled(epochs_done, config):
+                settled.set()
         if metrics is not None:
             metrics = dict(metrics)
             metrics["k"] = metrics["k"].at[:, -1].set(jnp.asarray(choice.k, jnp.float32))
@@ -381,12 +397,13 @@ def _run_chunks(
     record,
     stop=None,
     after_epoch=None,
+    settled=None,
 ):
     """Runs epochs done.. in chunks of `checkpoint_every` (vmapped over seeds); returns the state.
 
     Stops after `max_chunks` chunks (None: at config.epochs), or after the epoch running when
-    `stop` (a `threading.Event`) is set: the chunk ends there, so a stopped run loses no finished
-    epoch. `record(start, n, state, metrics)` runs after each chunk. Epochs are dispatched one at
+    `stop` or `settled` (`threading.Event`s: asked to stop; trained enough) is set: the chunk
+    ends there, so a stopped run loses no finished epoch. `record(start, n, state, metrics)` runs after each chunk. Epochs are dispatched one at
     a time and the host waits for each before the next, so it never runs ahead of a stop; the
     next chunk starts before the last one's files are written, so the device keeps working while
     the host saves (JAX dispatch is asynchronous; the arrays are immutable).
@@ -406,6 +423,8 @@ def _run_chunks(
             if after_epoch is not None:
                 state, metrics = after_epoch(epoch + 1, state, metrics)
             parts.append(metrics)
+            if settled is not None and settled.is_set():
+                break
             if stop is not None:
                 jax.block_until_ready(state)
                 if stop.is_set():
@@ -414,7 +433,7 @@ def _run_chunks(
         if pending is not None:
             record(*pending)
         pending = (start, len(parts), state, metrics)
-        if stop is not None and stop.is_set():
+        if any(e is not None and e.is_set() for e in (stop, settled)):
             break
     if pending is not None:
         record(*pending)

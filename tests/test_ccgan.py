@@ -493,6 +493,61 @@ def test_k_chosen_in_the_target_arm_like_the_authors_and_resumed_exactly(tiny_se
     )
 
 
+class _ScriptedChoice:
+    """A `SimulatorChoice` stand-in whose held-out errors (cm, one row [S] per scoring, the
+    same at every k) follow a script, so that the early stop is decided by known numbers."""
+
+    def __init__(self, script, hold_factors):
+        self.script, self.hold_factors, self.calls = list(script), hold_factors, 0
+
+    def choose(self, g_c_params):
+        from ccgan.sim_choice import Choice
+
+        error = np.asarray(self.script[self.calls], float)
+        self.calls += 1
+        errors = np.repeat(error[:, None], len(self.hold_factors), 1)
+        return Choice(k=np.full(len(error), self.hold_factors[0]), error_cm=error, errors_cm=errors)
+
+
+def test_patience_stops_once_no_seed_improves_and_writes_the_best(tiny_setup, tmp_path):
+    """patience 2 with a scoring every 2 epochs: seed 0 improves last at epoch 4, seed 1 at 2,
+    so the scorings at 6 and 8 improve nothing and training ends at epoch 8 of 40, with each
+    seed's best G_c written; a rerun in the same folder trains no further."""
+    data, fconf, fparams, _, _ = tiny_setup
+    config = dataclasses.replace(
+        TINY, epochs=40, k_choice="simulator", hold_factors=(1, 2), stretch_every=2, patience=2
+    )
+    # Before training (never counts), then after epochs 2, 4, 6, 8, ...
+    script = [[9, 9], [5, 4], [3, 4.5], [3.5, 4.1], [3.2, 4.2]] + [[1, 1]] * 20
+    judge = _ScriptedChoice(script, config.hold_factors)
+    kw = dict(seeds=(0, 1), forward_model=fconf.model, progress=False, k_choice=judge)
+    state, rows = train_lib.train_and_evaluate(config, data, fparams, tmp_path / "run", **kw)
+    assert int(state.epoch[0]) == 8 and judge.calls == 5
+    assert max(r["epoch"] for r in rows) == 8
+    _, best_meta = checkpoint.load(tmp_path / "run" / "best_gen.ckpt")
+    assert best_meta["best_epoch"] == [4, 2]
+    assert best_meta["best_error_cm"] == [3.0, 4.0]
+    for seed in (0, 1):
+        assert (tmp_path / "run" / f"translator_seed{seed}.ckpt").is_file()
+    # Resumed (a chain's rerun): settled already, so no epoch and no scoring more.
+    again, _ = train_lib.train_and_evaluate(config, data, fparams, tmp_path / "run", **kw)
+    assert int(again.epoch[0]) == 8 and judge.calls == 5
+    # Without patience the same script trains all 40 epochs.
+    judge = _ScriptedChoice(script, config.hold_factors)
+    kw["k_choice"] = judge
+    full, _ = train_lib.train_and_evaluate(
+        dataclasses.replace(config, epochs=10, patience=0), data, fparams, tmp_path / "all", **kw
+    )
+    assert int(full.epoch[0]) == 10 and judge.calls == 6
+
+
+def test_patience_needs_the_simulator_scores():
+    with pytest.raises(train_lib.ConfigError, match="patience"):
+        config_lib.TrainConfig(patience=2, keep_best=False)
+    with pytest.raises(train_lib.ConfigError, match="patience"):
+        config_lib.TrainConfig(patience=2, k_choice="forward")
+
+
 def test_retired_feedback_rollouts_are_refused_by_name():
     for impl in config_lib.RETIRED_FEEDBACK_IMPLS:
         with pytest.raises(train_lib.ConfigError, match=f"got '{impl}', a retired rollout"):

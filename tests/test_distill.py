@@ -240,6 +240,44 @@ def test_distill_cli_teacher_only_plans_and_stops(tmp_path):
         assert f["c_train"].shape == (2, 3, 3) and f["c_val"].shape == (1, 3, 3)
 
 
+def test_a_teacher_planned_without_translators_teaches_another_run(tmp_path, monkeypatch, capsys):
+    """A chain plans its teacher while the translators train: --teacher-only with --hold-factor
+    and no --translators, then the distillation starts from that cache (--teacher-from) and
+    plans nothing; a cache of other settings, or a run without translators, is refused."""
+    k = load_translator().k
+    common = ["--n-train", "2", "--n-val", "1", "--duration-s", "0.3", "--batch-size", "2"]
+    common += ["--hold-factor", str(k)]
+    with pytest.raises(SystemExit) as no_k:
+        distill.main(["--out", str(tmp_path / "t0"), "--teacher-only"] + common[:-2])
+    assert no_k.value.code == 2 and "needs --hold-factor" in capsys.readouterr().err
+    planned = tmp_path / "teacher"
+    distill.main(["--out", str(planned), "--teacher-only"] + common)
+    with np.load(planned / "teacher.npz") as f:
+        assert f["c_train"].shape == (2, 3, 3)
+        want = f["c_train"].copy()
+    with pytest.raises(SystemExit) as no_translators:
+        distill.main(["--out", str(tmp_path / "t1")] + common)
+    assert no_translators.value.code == 2 and "--translators is required" in capsys.readouterr().err
+
+    def no_planning(*args, **kwargs):
+        raise AssertionError("the teacher was planned again")
+
+    monkeypatch.setattr(distill.mpc, "track", no_planning)
+    out = tmp_path / "run"
+    args = ["--translators", str(translator_path()), "--out", str(out), "--epochs", "1"]
+    args += ["--eval-every", "1", "--teacher-from", str(planned / "teacher.npz")] + common
+    distill.main(args)
+    assert "teacher: started from" in capsys.readouterr().out
+    assert load_translator(out / "translator.ckpt").k == k
+    with np.load(out / "teacher.npz") as f:
+        np.testing.assert_array_equal(f["c_train"], want)
+    other = [a if a != "0.3" else "0.4" for a in args]
+    with pytest.raises(SystemExit) as refused:
+        distill.main([a if a != str(out) else str(tmp_path / "other") for a in other])
+    assert refused.value.code == 2 and "planned with other settings" in capsys.readouterr().err
+    assert not (tmp_path / "other" / "teacher.npz").exists()
+
+
 def test_distill_cli_stopped_teacher_keeps_its_progress_and_says_rerun(tmp_path, monkeypatch):
     """The MJX teacher past --max-wall-s stops part-way through a shard, into
     teacher_partial.npz beside the cache, and the CLI exits 143 (rerun to go on)."""

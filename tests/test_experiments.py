@@ -327,14 +327,23 @@ def _results(x_err_cm: dict) -> dict:
 
 
 def test_report_checks_each_target_shape_by_shape():
-    results = _results({"none": 5.0, "stretch": 0.5, "ccgan": 0.9, "wcgan": 2.0, "oracle": 0.3})
-    lines = report.target_lines(results, aged=None)
+    results = _results(
+        {"none": 5.0, "stretch": 0.5, "ccgan": 0.9, "wcgan": 2.0, "oracle": 0.3, "mpc": 0.7}
+    )
+    aged = _results({"none": 5.0, "stretch": 2.0, "ccgan_sim": 0.9})
+    aged["table"]["kite"]["ccgan_sim"]["x_err_cm_mean"] = 1.2
+    lines = report.target_lines(results, aged=aged)
     assert "CCGAN-GP at most the paper's CCGAN-GP error: 5 of 5 shapes: met" in lines[0]
     assert "below WCGAN-GP and below untranslated: 5 of 5 shapes: met" in lines[1]
     # 0.9 cm is under a third of the paper's error only on the circle (2.98 cm).
     assert "a third of the paper's error: 1 of 5 shapes: not met" in lines[2]
     assert "within 1.5x the oracle over its window: 0 of 5 shapes: not met" in lines[3]
-    assert "translator is lower on 0 of 5" in lines[4]
+    assert "at most 0.5x stretch only: 0 of 5 shapes: not met" in lines[4]
+    assert "ratio translator / stretch 1.80-1.80" in lines[4]
+    assert "1.5x the receding-horizon tracker over the whole program" in lines[5]
+    assert lines[5].endswith("5 of 5 shapes: met")  # 0.9 <= 1.5 x 0.7
+    assert lines[6].startswith("- Aged arm: CCGAN-GP refined in the simulator at most 0.5x")
+    assert lines[6].endswith("4 of 5 shapes: not met (missed on kite)")
     table = report.paper_lines(results)
     assert "| circle | 2.98 / 0.276 | 7.14 / 0.636 | 0.90 / 0.100 |" in "\n".join(table)
 
