@@ -403,7 +403,8 @@ def _run_chunks(
 
     Stops after `max_chunks` chunks (None: at config.epochs), or after the epoch running when
     `stop` or `settled` (`threading.Event`s: asked to stop; trained enough) is set: the chunk
-    ends there, so a stopped run loses no finished epoch. `record(start, n, state, metrics)` runs after each chunk. Epochs are dispatched one at
+    ends there, so a stopped run loses no finished epoch. `record(start, n, state, metrics)`
+    runs after each chunk. Epochs are dispatched one at
     a time and the host waits for each before the next, so it never runs ahead of a stop; the
     next chunk starts before the last one's files are written, so the device keeps working while
     the host saves (JAX dispatch is asynchronous; the arrays are immutable).
