@@ -7,8 +7,9 @@
 #   PIECE_MIB=30 bash bench/device/fetch_wheels.sh
 #
 # Writes (all git-ignored, see .gitignore):
-#   .whl/            mujoco 3.17.0, mujoco-mjx 3.17.0 and the three needs the GPU image lacks
-#                    (glfw, pyopengl, trimesh); ~37 MiB, one call's load; SHA256SUMS beside them.
+#   .whl/            mujoco 3.17.0 (without MuJoCo Studio, see below), mujoco-mjx 3.17.0 and the
+#                    three needs the GPU image lacks (glfw, pyopengl, trimesh); ~22 MiB, one
+#                    call's load beside the ~39 MiB tree; SHA256SUMS beside them.
 #   .whl-warp/       the whole warp-lang 1.18.0 wheel (~142 MiB; never carried) and its SHA256SUMS.
 #   .whl-warp1/ ...  the wheel cut with `split` into pieces (.part-aa, .part-ab, ...), one folder
 #                    per call, each with a copy of SHA256SUMS.
@@ -40,7 +41,12 @@ download() {  # folder, requirements...
 }
 
 rm -rf .whl .whl-warp .whl-warp[0-9]*
-download .whl "${MUJOCO_WHEELS[@]}"
+mkdir -p .whl
+python3 -m pip download -q "${PIP_TARGET[@]}" -d .whl "${MUJOCO_WHEELS[@]}"
+# mujoco's wheel carries MuJoCo Studio (mujoco/experimental: a GUI, 15 of its 27 MB), which
+# nothing here imports: without it the tree, the wheels of one call and the tree fit 64 MiB.
+zip -q -d .whl/mujoco-*.whl 'mujoco/experimental/*'
+(cd .whl && sha256sum -- *.whl >SHA256SUMS)
 download .whl-warp "$WARP_WHEEL"
 
 # Bytes that travel with every call: tracked files plus untracked files git does not ignore.
