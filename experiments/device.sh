@@ -14,7 +14,8 @@
 # 15 MiB: the device returns no larger file) with paper_state.sha256, plus paper.md, the log and
 # the GPU's use sampled every 15 s. The deadline, the 60 s a stopped stage may take to end its
 # epoch and checkpoint (experiments.stages.STOP_GRACE_S), the install and the packing stay under
-# the device's 600 s per call.
+# the device's 600 s per call. Keep DEADLINE_S at about 500: at 550 the 600 s limit came during the
+# packing and the call returned nothing (results/paper/rerun_2026-11-26/README.md, call 2).
 #
 # Sequence of `run` calls (nvidia-h100-x1 or nvidia-h200, or a kind of several GPUs, where each
 # stage gets a GPU of its own; timeout_s 600):
