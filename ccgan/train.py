@@ -796,11 +796,15 @@ def main(argv=None) -> None:
         domains=(d_s.domain, d_c.domain),
         k_choice=k_choice,
     )
-    if int(np.asarray(state.epoch)[0]) < config.epochs:
-        print(
-            f"stopped at epoch {int(np.asarray(state.epoch)[0])}: rerun to resume", file=sys.stderr
-        )
+    epochs_done = int(np.asarray(state.epoch)[0])
+    if epochs_done < config.epochs and stop.is_set():
+        print(f"stopped at epoch {epochs_done}: rerun to resume", file=sys.stderr)
         sys.exit(128 + signal.SIGTERM)
+    if epochs_done < config.epochs:  # not stopped: --patience ended it, its best written
+        print(
+            f"trained {epochs_done} of at most {config.epochs} epochs: {config.patience}"
+            " scoring(s) in a row improved no seed (--patience)"
+        )
 
 
 if __name__ == "__main__":

@@ -714,3 +714,27 @@ def test_predict_poses_refuses_nan_and_kpa():
             tr.predict_poses(bad, pose0)
     with pytest.raises(ValueError, match="pose0"):
         tr.predict_poses(commands, np.full(6, np.nan))
+
+
+def test_train_cli_stopped_by_patience_ends_as_finished(tmp_path, files, small_arm, monkeypatch):
+    """A run that --patience ends early is finished, not stopped: exit status 0 (the chain
+    would otherwise call it again and again), its best translators written."""
+    from ccgan.sim_choice import Choice, SimulatorChoice
+
+    script = iter([[9.0], [2.0], [3.0], [4.0], [5.0], [6.0], [7.0]])  # best after epoch 1
+
+    def scripted(self, g_c_params):
+        error = np.asarray(next(script))
+        return Choice(k=np.array([1]), error_cm=error, errors_cm=np.repeat(error[:, None], 2, 1))
+
+    monkeypatch.setattr(SimulatorChoice, "choose", scripted)
+    model, _ = small_arm
+    argv = ["--source", files["s"], "--constrained", files["c"], "--model", model]
+    argv += [*TINY_TRAIN[:-2], "--k-choice", "simulator", "--k-choice-seconds", "0"]
+    argv[argv.index("--epochs") + 1] = "6"
+    argv += ["--stretch-every", "1", "--patience", "1", "--hold-factors", "1", "2"]
+    argv += ["--workdir", str(tmp_path / "run")]
+    train_lib.main(argv)  # no SystemExit
+    rows = train_lib._read_rows(tmp_path / "run" / "k_choices.csv")
+    assert [r["epoch"] for r in rows] == [0, 1, 2]
+    assert (tmp_path / "run" / "translator_seed0.ckpt").is_file()
