@@ -4,8 +4,10 @@
 # of it but the teacher caches (teacher*.npz) as $OUT/issue30.tar.gz (unpack into studies/results/<machine>/).
 #
 # Call sequence (one H100 or H200, timeout_s 600), back to back while the machine is warm:
-#   1. carry [".whl-extra1"]: bash studies/issue30_gpu.sh install
-#   2. carry [".whl-extra2"]: bash studies/issue30_gpu.sh bench [bench.teacher flags]
+#   1. carry [".whl"] (bench/device/fetch_wheels.sh; before it dropped MuJoCo Studio from
+#      mujoco's wheel, the wheels came in two halves, .whl-extra1 and .whl-extra2, over two
+#      calls): bash studies/issue30_gpu.sh install
+#   2. bash studies/issue30_gpu.sh bench [bench.teacher flags]
 #      the teacher in MuJoCo C on the host's cores beside MJX on the GPU (bench/results/<gpu>).
 #   3. bash studies/issue30_gpu.sh teacher K [ccgan.distill flags]
 #      the teacher's commands for the programs (ccgan.distill --teacher-only), cached in
