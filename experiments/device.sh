@@ -26,7 +26,11 @@
 #      the next machine as below.
 #   If the machine was lost: carry [".whl"] with `RUN=0 bash experiments/device.sh`, then at once
 #   carry [".paper_state"] (the last returned state; the .whl and the state do not fit one call
-#   beside the tree) with `bash experiments/device.sh`. A second run beside a kept one uses its
+#   beside the tree) with `bash experiments/device.sh`. When the state and the tree exceed the
+#   64 MiB a call carries: `bash experiments/take_state.sh --pieces 3` here cuts the kept state
+#   into .paper_state_part1..3/, and the calls carry [".whl-extra1", ".paper_state_part1"],
+#   [".whl-extra2", ".paper_state_part2"] (both with RUN=0), then [".paper_state_part3"] with
+#   `bash experiments/device.sh` (the .whl halves: bench/device/install.sh). A second run beside a kept one uses its
 #   own folder: STATE_DIR=.paper_state_NAME here and there (carry [".paper_state_NAME"]).
 # Here, after each call: bash experiments/take_state.sh FILES_AT (joins and checks the pieces into
 # the git-ignored .paper_state/). Finished: bash experiments/take_state.sh FILES_AT runs/ unpacks
@@ -35,6 +39,30 @@ set -uo pipefail
 source "$(dirname "${BASH_SOURCE[0]}")/../bench/device/install.sh" || exit 1
 RUN_DIR=$TMP/paper
 STATE_DIR=${STATE_DIR:-.paper_state} # another run's state folder keeps runs apart (take_state.sh)
+# A state too large to travel beside the tree and the wheels comes in pieces over several calls
+# (`take_state.sh --pieces N` cuts it into .paper_state_part1/ ... each with the whole file's
+# sha256): each call stages what it carried in $TMP/state_parts, and once every piece is there they
+# are joined, checked and restored from.
+for dir in "$STATE_DIR"_part[0-9]*; do
+  [[ -d $dir ]] || continue
+  mkdir -p "$TMP/state_parts" && cp -f "$dir"/* "$TMP/state_parts/"
+  echo "staged state piece(s) $(cd "$dir" && ls -- *.part-* | tr '\n' ' ')from $dir"
+done
+if [[ ! -d $RUN_DIR && -f $TMP/state_parts/paper_state.sha256 ]]; then
+  want=$(cat "$TMP/state_parts/n_pieces" 2>/dev/null || echo 0)
+  have=$(compgen -G "$TMP/state_parts/paper_state.tar.gz.part-*" | wc -l)
+  if ((have == want)); then
+    cat "$TMP"/state_parts/paper_state.tar.gz.part-* >"$TMP/state_parts/paper_state.tar.gz"
+    if (cd "$TMP/state_parts" && sha256sum -c --quiet paper_state.sha256); then
+      STATE_DIR=$TMP/state_parts
+    else
+      echo "the joined state pieces do not match their sha256: not restored"
+      exit 1
+    fi
+  else
+    echo "state pieces staged so far: $have of $want"
+  fi
+fi
 if [[ ! -d $RUN_DIR && -f $STATE_DIR/paper_state.tar.gz ]]; then
   tar -xzf "$STATE_DIR/paper_state.tar.gz" -C "$TMP" && echo "restored $RUN_DIR from $STATE_DIR"
 fi

@@ -9,9 +9,35 @@
 #   bash experiments/take_state.sh FILES_AT runs/    # and unpack the run folder into runs/paper
 # It never unpacks over a run folder: with UNPACK_DIR/paper already there it refuses before
 # doing anything (move that folder away, or name another UNPACK_DIR).
+#   bash experiments/take_state.sh --pieces N       # cut the kept state into N carryable folders
+# --pieces N: .paper_state_part1/ ... .paper_state_partN/, each with a piece of the kept file,
+# paper_state.sha256 and n_pieces, for a state that does not travel beside the tree in one call
+# (experiments/device.sh stages the pieces call by call and restores once all are there).
 set -euo pipefail
-from=$(cd "${1:?usage: take_state.sh FILES_AT [UNPACK_DIR]}" && pwd)
 root=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
+if [[ ${1:-} == --pieces ]]; then
+  n=${2:?usage: take_state.sh --pieces N}
+  [[ $n =~ ^[1-9][0-9]?$ ]] || { echo "--pieces takes a number from 1 to 99, got $n" >&2; exit 2; }
+  state_dir=$root/${STATE_DIR:-.paper_state}
+  whole=$state_dir/paper_state.tar.gz
+  [[ -f $whole ]] || { echo "no $whole to cut" >&2; exit 1; }
+  rm -rf "$state_dir"_part[0-9]*
+  size=$(stat -c %s "$whole")
+  tmp=$(mktemp -d)
+  trap 'rm -rf "$tmp"' EXIT
+  split -n "$n" -d -a 2 "$whole" "$tmp/paper_state.tar.gz.part-"
+  i=1
+  for piece in "$tmp"/paper_state.tar.gz.part-*; do
+    mkdir -p "$state_dir"_part$i
+    mv "$piece" "$state_dir"_part$i/
+    (cd "$state_dir" && sha256sum paper_state.tar.gz) >"$state_dir"_part$i/paper_state.sha256
+    echo "$n" >"$state_dir"_part$i/n_pieces
+    i=$((i + 1))
+  done
+  echo "cut $(numfmt --to=iec "$size") into $n pieces: $(cd "$root" && ls -d "${STATE_DIR:-.paper_state}"_part* | tr '\n' ' ')"
+  exit 0
+fi
+from=$(cd "${1:?usage: take_state.sh FILES_AT [UNPACK_DIR]}" && pwd)
 if [[ -n ${2:-} && ( -e $2/paper || -L $2/paper ) ]]; then
   echo "$2/paper exists: take_state.sh does not unpack over a run folder; nothing was changed." \
     "Move it away or name another UNPACK_DIR" >&2

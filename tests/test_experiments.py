@@ -441,6 +441,58 @@ def test_take_state_never_unpacks_over_a_run_folder(tmp_path):
     assert (tmp_path / "elsewhere" / "paper" / "stage.json").read_text() == "{}"
 
 
+def test_state_cut_into_pieces_is_restored_on_the_device_once_every_piece_has_come(tmp_path):
+    """take_state.sh --pieces N cuts the kept state into N carryable folders; device.sh (RUN=0,
+    call by call, each carrying one piece) stages them, restores nothing until the last has
+    come, then restores the run folder; a piece that does not match the sha256 is refused."""
+    take, blob, _ = _state_pieces(tmp_path)
+    repo = tmp_path / "repo"
+    assert take().returncode == 0  # keeps .paper_state_rerun/paper_state.tar.gz
+    script = repo / "experiments" / "take_state.sh"
+    env = os.environ | {"STATE_DIR": ".paper_state_rerun"}
+    bad = subprocess.run(["bash", str(script), "--pieces", "x"], env=env, capture_output=True)
+    assert bad.returncode == 2
+    cut = subprocess.run(
+        ["bash", str(script), "--pieces", "3"], env=env, capture_output=True, text=True
+    )
+    assert cut.returncode == 0, cut.stderr
+    pieces = sorted(repo.glob(".paper_state_rerun_part*"))
+    assert [p.name[-1] for p in pieces] == ["1", "2", "3"]
+    joined = b"".join(next(p.glob("*.part-*")).read_bytes() for p in pieces)
+    assert joined == blob
+
+    device = tmp_path / "device"  # the copy of the tree on the GPU machine
+    (device / "experiments").mkdir(parents=True)
+    (device / "bench" / "device").mkdir(parents=True)
+    shutil.copy(paper.REPO / "experiments" / "device.sh", device / "experiments")
+    (device / "bench" / "device" / "install.sh").write_text(
+        'TMP=$DEVICE_TMP; OUT=$TMP/out; PY=python3; mkdir -p "$OUT"\n'
+    )
+    env = os.environ | {"DEVICE_TMP": str(tmp_path / "tmp"), "RUN": "0",
+                        "STATE_DIR": ".paper_state_rerun"}  # fmt: skip
+    run_folder = tmp_path / "tmp" / "paper"
+    for i, piece in enumerate(pieces):
+        shutil.copytree(piece, device / piece.name)
+        call = subprocess.run(
+            ["bash", "experiments/device.sh"], cwd=device, env=env, capture_output=True, text=True
+        )
+        assert call.returncode == 0, call.stderr
+        shutil.rmtree(device / piece.name)  # the next call carries only its own piece
+        if i < 2:
+            assert f"{i + 1} of 3" in call.stdout and not run_folder.exists()
+    assert "restored" in call.stdout
+    assert (run_folder / "stage.json").read_text() == "{}"
+
+    shutil.rmtree(run_folder)
+    parts = tmp_path / "tmp" / "state_parts"
+    (parts / "paper_state.tar.gz.part-01").write_bytes(b"garbage")
+    call = subprocess.run(
+        ["bash", "experiments/device.sh"], cwd=device, env=env, capture_output=True, text=True
+    )
+    assert call.returncode == 1 and "do not match" in call.stdout
+    assert not run_folder.exists()
+
+
 def test_compare_runs_names_equal_and_differing_outputs_and_each_seeds_held_out_number(
     tmp_path, capsys
 ):
