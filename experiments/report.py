@@ -157,6 +157,59 @@ def target_lines(results: dict, aged: dict | None) -> list[str]:
     return lines
 
 
+#: The README's columns for the chain's tables: (method in shapes.json, header).
+README_METHODS = (
+    ("none", "untranslated"),
+    ("stretch", "stretch only"),
+    ("ccgan", "CCGAN-GP"),
+    ("wcgan", "WCGAN-GP"),
+    ("ccgan_sim", "distilled"),
+    ("mpc", "tracker"),
+    ("oracle", "oracle, first 2 s"),
+)
+
+
+def readme_tables(results: dict) -> list[str]:
+    """The README's tables of a chain's evaluation stage (`results`: its shapes.json content).
+
+    The first gives each method's X_err (cm) / phi_err (rad) means with its k, beside the
+    paper's Table I (CCGAN-GP, cm / rad) where the arm is D_c's; the second, each error as a
+    percentage of the shape's tip excursion. Methods the stage did not run are left out, so the
+    aged arm's table has its three columns. `tests/test_readme.py` checks that the README holds
+    these lines for the committed run.
+    """
+    table = results["table"]
+    shapes = list(table)
+    methods = [(m, h) for m, h in README_METHODS if m in table[shapes[0]]]
+    k = {m: table[shapes[0]][m]["k"] for m, _ in methods}
+    paper = results["config"].get("target_domain", "constrained") == "constrained"
+    head = [f"{h} (k = {k[m]})" if m != "none" else h for m, h in methods]
+    head += ["paper Table I CCGAN-GP"] if paper else []
+    lines = ["| shape | " + " | ".join(head) + " |", "|---" * (len(head) + 1) + "|"]
+    for shape in shapes:
+        cells = [
+            f"{table[shape][m]['x_err_cm_mean']:.2f} / {table[shape][m]['phi_err_rad_mean']:.3f}"
+            for m, _ in methods
+        ]
+        if paper:
+            cm, rad = PAPER_TABLE_I[shape]["ccgan"]
+            cells.append(f"{cm:.2f} / {rad:.3f}")
+        lines.append(f"| {shape.replace('_', ' ')} | " + " | ".join(cells) + " |")
+    lines.append("")
+    over_window = [m for m, _ in methods if table[shapes[0]][m].get("window_steps") is None]
+    lines += [
+        "| shape | tip excursion cm | " + " | ".join(h for m, h in methods if m in over_window)
+        + " |",
+        "|---" * (len(over_window) + 2) + "|",
+    ]  # fmt: skip
+    for shape in shapes:
+        rows = table[shape]
+        excursion = rows[over_window[0]]["target_excursion_cm"]
+        cells = [f"{rows[m]['x_err_pct_of_excursion']:.1f}%" for m in over_window]
+        lines.append(f"| {shape.replace('_', ' ')} | {excursion:.2f} | " + " | ".join(cells) + " |")
+    return lines
+
+
 def write(chain: Chain, config: dict, config_path: Path) -> Path:
     """Writes chain.out/paper.md from the finished stages; returns its path."""
     results = _shapes(chain, TABLE_STAGE)
