@@ -24,11 +24,12 @@ stage, with "method": "distill"; earlier stages stay in "finetune_earlier"), rew
 validation ("complete": false until the run ends), so a killed run keeps its best iterates.
 
     python -m ccgan.distill \\
-        --translators results/paper/run/ccgan_large/translator_seed{0,1,2}.ckpt \\
+        --translators results/paper/rerun_2026-11-26/run/ccgan/translator_seed{0,1,2}.ckpt \\
         --seeds 0 1 2 --hold-factor 15 --out runs/ccgan_distilled
 
 As `ccgan.finetune`, the CLI simulates the arm of `--model` (default the I-Support arm,
-`mjx_arm.constants.TRANSLATOR_MODEL_PATH`, the one the committed translators were trained on).
+`mjx_arm.constants.TRANSLATOR_MODEL_PATH`, models/softarm.xml, the one the committed
+translators were trained on).
 """
 
 from __future__ import annotations

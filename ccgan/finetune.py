@@ -37,12 +37,15 @@ pose bounds; the fine-tuning settings and history added to their metadata), name
 `translator_seed{s}.ckpt` and `translator.ckpt` (a link to the first seed's), for
 `ccgan.load_translator` and `python -m eval.shapes --ccgan-sim-path`.
 
-    python -m ccgan.finetune --translators results/paper/run/ccgan/translator_seed{0,1,2}.ckpt \\
+    python -m ccgan.finetune \\
+        --translators results/paper/rerun_2026-11-26/run/ccgan/translator_seed{0,1,2}.ckpt \\
         --seeds 0 1 2 --out runs/ccgan_ft
 
-The CLI simulates the arm of `--model` (default `mjx_arm.constants.TRANSLATOR_MODEL_PATH`, the
-I-Support arm the committed translators were trained on; `models/softarm_solid.xml` is the
-earlier solid-disc arm, whose translators are in results/solid/translators/)
+The CLI simulates the arm of `--model` (default `mjx_arm.constants.TRANSLATOR_MODEL_PATH`,
+models/softarm.xml, the I-Support arm the committed translators were trained on;
+`models/softarm_linear.xml` is the previous, linear-law arm, whose translators are in
+results/paper/run/, and `models/softarm_solid.xml` the earlier solid-disc arm, whose
+translators are in results/solid/translators/)
 in D_s and in `--domain`, and refuses translators whose file records another arm's model hash.
 
 Gradients through thousands of MJX physics steps are slow on a CPU: use a GPU for real runs.

@@ -1,16 +1,16 @@
-"""One-off: labels the committed I-Support translators with what they are, payloads untouched.
+"""One-off: labels the previous I-Support arm's translators with what they are, payloads untouched.
 
 Translator files written before `ccgan.translator.LABELS` existed record their model hash but not
 their method or domains, so the aged pair's CCGAN-GP could be scored on D_c and a WCGAN-GP file
-as CCGAN-GP. This adds the labels to the chain's run (`results/paper/run/<stage>/
+as CCGAN-GP. This adds the labels to the chain's first run (`results/paper/run/<stage>/
 translator_seed*.ckpt`; `translator.ckpt` links to seed 0's) with `checkpoint.rewrite_meta`,
 which keeps each payload byte for byte and checks its sha256 afterwards.
 
 Each label is read from what made the file, never assumed: the method from the training config's
 `baseline` or the fine-tune stage's record, the target domain from the stage's command in its
 `stage.json` (the `--constrained` data file's domain, or `--domain`), the model hash from the
-file, which must be the arm of `models/softarm_linear.xml` (the I-Support arm the chain ran on,
-kept byte for byte when `models/softarm.xml` moved on). What changed goes to
+file, which must be the arm of `models/softarm_linear.xml` (the I-Support arm that run was made
+on, kept byte for byte when `models/softarm.xml` moved on). What changed goes to
 `results/paper/run/translator_labels.json`: each file's labels, its payload sha256 and its file
 sha256 before and after (the stage manifests keep the digests the stages wrote).
 
@@ -26,11 +26,15 @@ from pathlib import Path
 
 from ccgan import checkpoint
 from ccgan.cli import cli_parser
-from ccgan.translator import LABELS, TRANSLATORS_DIR, missing_labels
+from ccgan.translator import LABELS, LINEAR_TRANSLATORS_DIR, missing_labels
 from mjx_arm import constants
 
-#: The arm the committed run was made with (models/softarm.xml when the chain ran).
-RUN_MODEL = constants.TRANSLATOR_MODEL_PATH
+#: The run folder labelled: the chain's first run, of the previous arm (the chain's rerun on
+#: models/softarm.xml wrote labelled files).
+RUN_DIR = LINEAR_TRANSLATORS_DIR
+#: The arm that run was made with (models/softarm.xml when the chain ran, since kept as
+#: models/softarm_linear.xml).
+RUN_MODEL = constants.LINEAR_LAW_MODEL_PATH
 #: The run's stage folders that hold translators.
 STAGES = ("ccgan", "wcgan", "ccgan_large", "aged", "ccgan_sim", "aged_sim")
 #: The record of what was relabelled, beside the stage folders.
@@ -85,7 +89,7 @@ def labels_of(path: Path, meta: dict, stage_json: dict, model_hash: str) -> dict
     }
 
 
-def label_run(run: Path = TRANSLATORS_DIR, check: bool = False, log=print) -> dict:
+def label_run(run: Path = RUN_DIR, check: bool = False, log=print) -> dict:
     """Labels every translator file of the run folder `run` (see the module docstring).
 
     Returns:
@@ -127,10 +131,10 @@ def label_run(run: Path = TRANSLATORS_DIR, check: bool = False, log=print) -> di
 
 
 def main(argv=None) -> None:
-    """CLI: label the committed run's translators, or with --check only report; a file that
+    """CLI: label the first run's translators, or with --check only report; a file that
     needs labels under --check exits with status 1."""
     p = cli_parser("ccgan.label_translators", __doc__)
-    p.add_argument("--run", default=str(TRANSLATORS_DIR), help="the chain's run folder")
+    p.add_argument("--run", default=str(RUN_DIR), help="the chain's run folder")
     p.add_argument("--check", action="store_true", help="only report files without labels")
     a = p.parse_args(argv)
     changed = label_run(Path(a.run), check=a.check)

@@ -201,7 +201,7 @@ def stage_parser(
         "--model",
         default=str(constants.TRANSLATOR_MODEL_PATH),
         help="MJCF of the arm to simulate: the one the translators were trained on (the"
-        " committed translators: models/softarm_linear.xml)",
+        " committed translators: models/softarm.xml)",
     )
     p.add_argument(
         "--domain",

@@ -21,11 +21,18 @@ from ccgan.data import (
 )
 from ccgan.models import ForwardModel, Generator, forward_open_loop
 
-#: The committed translators of the I-Support arm (models/softarm_linear.xml): the run folder of
-#: `python -m experiments.paper`, one folder per stage (ccgan, wcgan, ccgan_sim, aged, aged_sim).
-TRANSLATORS_DIR = Path(__file__).resolve().parent.parent / "results" / "paper" / "run"
+_RESULTS = Path(__file__).resolve().parent.parent / "results"
+#: The committed translators of the I-Support arm (models/softarm.xml,
+#: `mjx_arm.constants.TRANSLATOR_MODEL_PATH`): the run folder of the chain's rerun
+#: (`python -m experiments.paper`), one folder per stage (ccgan, wcgan, ccgan_sim, aged_sim; the
+#: rerun made no aged CCGAN-GP).
+TRANSLATORS_DIR = _RESULTS / "paper" / "rerun_2026-11-26" / "run"
+#: The previous I-Support arm's translators (models/softarm_linear.xml, the linear law), the
+#: chain's first run (stages ccgan, wcgan, ccgan_large, ccgan_sim, aged, aged_sim), kept for
+#: comparison.
+LINEAR_TRANSLATORS_DIR = _RESULTS / "paper" / "run"
 #: The earlier solid-disc arm's translators (models/softarm_solid.xml), kept for comparison.
-SOLID_TRANSLATORS_DIR = Path(__file__).resolve().parent.parent / "results" / "solid" / "translators"
+SOLID_TRANSLATORS_DIR = _RESULTS / "solid" / "translators"
 #: Where `load_translator()` looks when given no path (override with $CCGAN_TRANSLATOR).
 DEFAULT_PATH = TRANSLATORS_DIR / "ccgan" / "translator.ckpt"
 

@@ -11,10 +11,11 @@ Methods:
            asked for (--ccgan-path etc.) must load, or the run stops before any work.
   ccgan_sim  the CCGAN-GP translator fine-tuned in the simulator (`ccgan.finetune` through the
            MJX rollout, then `ccgan.distill` by imitation of `tracking.mpc`; docs/training.md):
-           results/paper/run/ccgan_sim/translator.ckpt or --ccgan-sim-path; the project's
-           best translator, so the main job shows it beside CCGAN-GP and stretch only.
+           results/paper/rerun_2026-11-26/run/ccgan_sim/translator.ckpt or --ccgan-sim-path;
+           the project's best translator, so the main job shows it beside CCGAN-GP and stretch
+           only.
   wcgan    the WCGAN-GP baseline translator: a translator checkpoint given by --wcgan-path or
-           found at results/paper/run/wcgan/translator.ckpt.
+           found at results/paper/rerun_2026-11-26/run/wcgan/translator.ckpt.
   mpc      receding-horizon tracking in the D_c simulator itself (`tracking.mpc.track`, MuJoCo C,
            k = the stretch k): at every source step the next command is planned by Gauss-Newton
            on the simulated tracking error and applied. Not a translator (it needs the D_c
@@ -31,6 +32,10 @@ Methods:
            unless asked: five 2 s programs at k = 10 (5,000 physics steps each), 10 Adam steps,
            took 500 s on a 2-core CPU, compile included (results/full at commit 7e006b8); on an H200
            the first step took 98 s and each further one 11.6 s (bench/results/h200/oracle.md).
+
+The default checkpoints (`ccgan.translator.TRANSLATORS_DIR`) translate into the constrained
+domain whatever the target domain: with --target-domain aged they are refused as labelled for
+another domain (`load_translator`), before any work; the aged pair's are given by path.
 
 A translator checkpoint is read by `ccgan.translator.Translator`, the one translator class.
 `TranslatorMethod` is not a translator: it is an evaluation method backed by one, adding what the

@@ -54,18 +54,17 @@ RESULTS_DIR = "results"
 #: Parent of the run folders that runs with other settings write when no output folder is given:
 #: RUNS_DIR/quick-<time> for --quick, RUNS_DIR/custom-<time> otherwise, never results/.
 RUNS_DIR = "runs"
-#: What the report says of the arm at constants.TRANSLATOR_MODEL_PATH.
+#: What the report says of the arm at constants.TRANSLATOR_MODEL_PATH (the default model,
+#: constants.DEFAULT_MODEL_PATH).
 ARM_NOTE = (
-    "the I-Support arm fitted to the rod without stretch factors (the linear law), on which the"
-    " committed translators (results/paper/run/) were trained; the default arm"
-    " (models/softarm.xml) now follows the paper's Cosserat law, and its translators await a"
-    " rerun of the chain"
+    "the I-Support arm under the paper's Cosserat law (the default model), on which the"
+    " committed translators (results/paper/rerun_2026-11-26/run/) were trained"
 )
-#: What the report says of the arm at constants.DEFAULT_MODEL_PATH.
-DEFAULT_ARM_NOTE = (
-    "the I-Support arm under the paper's Cosserat law (the default model); the translators"
-    " committed in results/paper/run/ were trained on models/softarm_linear.xml, not on it"
-    " (translators given here were checked to be of this arm)"
+#: What the report says of the arm at constants.LINEAR_LAW_MODEL_PATH.
+LINEAR_ARM_NOTE = (
+    "the previous I-Support arm, fitted to the rod without stretch factors (the linear law),"
+    " whose translators are in results/paper/run/ (give them with --ccgan-path, --wcgan-path,"
+    " --ccgan-sim-path)"
 )
 #: What the report says of the arm at constants.SOLID_MODEL_PATH.
 SOLID_ARM_NOTE = (
@@ -132,7 +131,7 @@ class EvalConfig:
     """MJCF text of the arm (None: the file model_path); tests pass a 3-segment arm."""
     model_path: str = str(constants.TRANSLATOR_MODEL_PATH)
     """MJCF file of the arm when xml is None. Default: the arm the committed translators were
-    trained on (`constants.TRANSLATOR_MODEL_PATH`, models/softarm_linear.xml)."""
+    trained on (`constants.TRANSLATOR_MODEL_PATH`, models/softarm.xml)."""
     target_domain: str = "constrained"
     """The domain translated into (D_c): "constrained", or "aged" for the second pair."""
     ccgan_path: str | None = None
@@ -279,10 +278,11 @@ def model_description(cfg: EvalConfig) -> dict:
         name = str(path)
     notes = {
         constants.TRANSLATOR_MODEL_PATH.resolve(): ARM_NOTE,
-        constants.DEFAULT_MODEL_PATH.resolve(): DEFAULT_ARM_NOTE,
+        constants.LINEAR_LAW_MODEL_PATH.resolve(): LINEAR_ARM_NOTE,
         constants.SOLID_MODEL_PATH.resolve(): SOLID_ARM_NOTE,
     }
-    other = "not the arm the committed translators were trained on (models/softarm_linear.xml)"
+    translators_arm = constants.TRANSLATOR_MODEL_PATH.relative_to(constants.ROOT)
+    other = f"not the arm the committed translators were trained on ({translators_arm})"
     return {"file": name, "note": notes.get(path, other)}
 
 

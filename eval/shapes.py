@@ -20,8 +20,15 @@ import time
 from pathlib import Path
 
 from ccgan.cli import HelpFormatter
-from ccgan.translator import TRUST_FLAG
-from eval.methods import DEFAULT_METHODS, METHODS, PATH_FLAGS, TranslatorError
+from ccgan.translator import DEFAULT_PATH, LINEAR_TRANSLATORS_DIR, TRANSLATORS_DIR, TRUST_FLAG
+from eval.methods import (
+    CCGAN_SIM_DEFAULT_PATH,
+    DEFAULT_METHODS,
+    METHODS,
+    PATH_FLAGS,
+    WCGAN_DEFAULT_PATH,
+    TranslatorError,
+)
 from eval.pipeline import (
     RESULTS_DIR,
     RUNS_DIR,
@@ -31,7 +38,7 @@ from eval.pipeline import (
     is_main_job,
     quick,
 )
-from mjx_arm import programs, run_folder
+from mjx_arm import constants, programs, run_folder
 from mjx_arm.programs import (
     AMPLITUDE_BAR,
     CHAMBER_ANGLES_RAD,
@@ -201,42 +208,52 @@ def _add_run_options(p: argparse.ArgumentParser) -> None:
     )
 
 
+def _shown(path: Path) -> str:
+    """`path` as the help shows it: relative to the repository."""
+    return str(path.relative_to(constants.ROOT))
+
+
 def _add_arm_options(p: argparse.ArgumentParser) -> None:
     """The arm, the target domain and the translator checkpoints."""
     p.add_argument(
         "--model",
         metavar="MJCF",
         default=EvalConfig.model_path,
-        help="MJCF file of the arm; by default models/softarm_linear.xml, the I-Support arm the"
-        " committed translators were trained on (models/softarm.xml: the paper-law arm;"
-        " models/softarm_solid.xml: the solid-disc arm)",
+        help=f"MJCF file of the arm; by default {_shown(constants.TRANSLATOR_MODEL_PATH)}, the"
+        " I-Support arm under the paper's law, which the committed translators were trained on"
+        f" ({_shown(constants.LINEAR_LAW_MODEL_PATH)}: the previous, linear-law arm, whose"
+        f" translators are in {_shown(LINEAR_TRANSLATORS_DIR)}/;"
+        f" {_shown(constants.SOLID_MODEL_PATH)}: the solid-disc arm)",
     )
     p.add_argument(
         "--target-domain",
         default=EvalConfig.target_domain,
         choices=["constrained", "aged"],
-        help="D_c: the paper's viscous medium, or the aged arm (stiffness x0.7, same medium)",
+        help="D_c: the paper's viscous medium, or the aged arm (stiffness x0.7, same medium);"
+        " the default translators translate into the medium and are refused for aged: give the"
+        f" aged pair's (e.g. --ccgan-sim-path {_shown(TRANSLATORS_DIR)}"
+        "/aged_sim/translator.ckpt) or leave them out with --methods",
     )
     p.add_argument(
         "--ccgan-path",
         metavar="CKPT",
         default=None,
         help="CCGAN-GP translator checkpoint (default:"
-        " $CCGAN_TRANSLATOR, else results/paper/run/ccgan/translator.ckpt, skipped if absent)",
+        f" $CCGAN_TRANSLATOR, else {_shown(DEFAULT_PATH)}, skipped if absent)",
     )
     p.add_argument(
         "--wcgan-path",
         metavar="CKPT",
         default=None,
-        help="WCGAN-GP translator checkpoint (default:"
-        " results/paper/run/wcgan/translator.ckpt, skipped if absent)",
+        help=f"WCGAN-GP translator checkpoint (default: {_shown(WCGAN_DEFAULT_PATH)}, skipped"
+        " if absent)",
     )
     p.add_argument(
         "--ccgan-sim-path",
         metavar="CKPT",
         default=None,
         help="fine-tuned CCGAN-GP checkpoint"
-        " (default: results/paper/run/ccgan_sim/translator.ckpt, skipped if absent)",
+        f" (default: {_shown(CCGAN_SIM_DEFAULT_PATH)}, skipped if absent)",
     )
     p.add_argument(
         TRUST_FLAG,

@@ -14,15 +14,14 @@ DEFAULT_MODEL_PATH = ROOT / "models" / "softarm.xml"
 #: it is the comparison row of the model page. `ArmParams(section="solid")` regenerates its
 #: physics.
 SOLID_MODEL_PATH = ROOT / "models" / "softarm_solid.xml"
-#: The I-Support arm as fitted to the reference rod without the stretch (dilatation) factors of
-#: the paper's Cosserat law, kept byte for byte: the committed I-Support babbling data,
-#: translators and tables (results/paper/run/, results/) were made with it, and stay labelled
-#: as belonging to it until the chain is rerun on the default model.
+#: The previous I-Support arm, fitted to the reference rod without the stretch (dilatation)
+#: factors of the paper's Cosserat law, kept byte for byte: its chain run, results/paper/run/
+#: (babbling data, translators and tables), was made with it and is kept as history.
 LINEAR_LAW_MODEL_PATH = ROOT / "models" / "softarm_linear.xml"
-#: The arm the committed I-Support translators (results/paper/run/) were trained on, and so the
-#: default arm of every command that scores or refines them (eval.shapes, the fine-tune stages),
-#: until the chain is rerun on `DEFAULT_MODEL_PATH`.
-TRANSLATOR_MODEL_PATH = LINEAR_LAW_MODEL_PATH
+#: The arm the committed I-Support translators (results/paper/rerun_2026-11-26/run/) were
+#: trained on by the chain's rerun, and so the default arm of every command that scores or
+#: refines them (eval.shapes, the fine-tune stages).
+TRANSLATOR_MODEL_PATH = DEFAULT_MODEL_PATH
 
 #: Actuators of the three chambers, at 0, 120 and 240 degrees around the arm's axis.
 CHAMBER_ACTUATORS = ("chamber_0", "chamber_1", "chamber_2")

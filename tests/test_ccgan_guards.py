@@ -649,6 +649,23 @@ def test_training_refuses_validation_files_as_training_data_and_vice_versa(
 COMMITTED = translator_lib.TRANSLATORS_DIR / "ccgan" / "translator.ckpt"
 
 
+def test_the_default_translator_is_of_the_default_arm(monkeypatch):
+    """`load_translator()` with no path reads the chain's rerun on models/softarm.xml: a CCGAN-GP
+    into D_c whose recorded arm is that file's `Arm.model_hash`, the arm the stages default to."""
+    monkeypatch.delenv("CCGAN_TRANSLATOR", raising=False)
+    assert constants.TRANSLATOR_MODEL_PATH == constants.DEFAULT_MODEL_PATH
+    assert translator_path() == translator_lib.DEFAULT_PATH == COMMITTED
+    arm_hash = mjx_arm.load(constants.DEFAULT_MODEL_PATH).model_hash
+    meta, _ = checkpoint.read(translator_path())
+    assert translator_lib.translator_labels(meta) == labelled("ccgan", "constrained", arm_hash)
+    default = load_translator(model_hash=arm_hash, method="ccgan", target_domain="constrained")
+    assert default.k >= 1
+    # The previous arm's run is kept beside it, labelled for its own arm.
+    old, _ = checkpoint.read(translator_lib.LINEAR_TRANSLATORS_DIR / "ccgan" / "translator.ckpt")
+    assert old["model_hash"] == mjx_arm.load(constants.LINEAR_LAW_MODEL_PATH).model_hash
+    assert old["model_hash"] != arm_hash
+
+
 def test_load_translator_refuses_what_it_was_not_told_to_expect(tmp_path):
     """`load_translator(..., method=, target_domain=, model_hash=)`: another method, domain or
     arm is refused naming both values; an unlabelled file only with trust_unlabelled."""

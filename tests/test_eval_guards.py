@@ -89,11 +89,11 @@ def test_quick_run_is_marked_and_states_its_arm_and_lengths(in_tmp, capsys):
     assert out.name.startswith("quick-") and not Path("results").exists()
     assert data["config"]["out_dir"] == str(out)
     # The default arm is the I-Support one the committed translators were trained on.
-    assert data["model_hash"] == _file_hash(constants.TRANSLATOR_MODEL_PATH)
-    assert data["model"]["file"] == "models/softarm_linear.xml"
+    assert data["model_hash"] == _file_hash(constants.DEFAULT_MODEL_PATH)
+    assert data["model"]["file"] == "models/softarm.xml"
     md = (out / "shapes.md").read_text()
     assert "QUICK RUN: 1 s programs, seeds [0]" in md
-    assert "`models/softarm_linear.xml`, the I-Support arm" in md
+    assert "`models/softarm.xml`, the I-Support arm" in md
     assert "0.5 s validation program" in md and "20 s validation" not in md
     assert json.loads((out / "shapes.json").read_text())["config"]["quick"] is True
     figures = [out / f for f in data["figures"]]
@@ -329,14 +329,20 @@ def test_translators_trained_on_another_arm_are_refused(small_xml, tmp_path, mon
 
 
 def test_default_arm_is_the_isupport_one_and_model_path_is_used(small_xml, tmp_path):
-    assert pipeline.EvalConfig().model_path == str(constants.TRANSLATOR_MODEL_PATH)
+    """The default arm is models/softarm.xml, the committed translators' arm; the previous
+    (linear-law) and solid-disc arms are named with where their translators are."""
+    assert constants.TRANSLATOR_MODEL_PATH == constants.DEFAULT_MODEL_PATH
+    assert pipeline.EvalConfig().model_path == str(constants.DEFAULT_MODEL_PATH)
+    assert shapes.parse_args([]).model_path == str(constants.DEFAULT_MODEL_PATH)
     described = pipeline.model_description(pipeline.EvalConfig())
-    assert described["file"] == "models/softarm_linear.xml"
-    assert "I-Support arm" in described["note"] and "without stretch factors" in described["note"]
-    default = pipeline.model_description(
-        pipeline.EvalConfig(model_path=str(constants.DEFAULT_MODEL_PATH))
+    assert described["file"] == "models/softarm.xml" and described["note"] == pipeline.ARM_NOTE
+    assert "paper's Cosserat law" in described["note"]
+    assert "results/paper/rerun_2026-11-26/run/" in described["note"]
+    linear = pipeline.model_description(
+        pipeline.EvalConfig(model_path=str(constants.LINEAR_LAW_MODEL_PATH))
     )
-    assert "paper's Cosserat law" in default["note"] and "not on it" in default["note"]
+    assert linear["file"] == "models/softarm_linear.xml"
+    assert "without stretch factors" in linear["note"] and "results/paper/run/" in linear["note"]
     solid = pipeline.model_description(
         pipeline.EvalConfig(model_path=str(constants.SOLID_MODEL_PATH))
     )
@@ -347,9 +353,8 @@ def test_default_arm_is_the_isupport_one_and_model_path_is_used(small_xml, tmp_p
     cfg = pipeline.EvalConfig(model_path=str(other))
     arm_s, arm_c = pipeline.load_arms(cfg)
     assert arm_s.model_hash == arm_c.model_hash == _file_hash(other)
-    assert (
-        "not the arm the committed translators were trained on"
-        in (pipeline.model_description(cfg)["note"])
+    assert pipeline.model_description(cfg)["note"] == (
+        "not the arm the committed translators were trained on (models/softarm.xml)"
     )
     # MJCF text wins over the file.
     arm_x, _ = pipeline.load_arms(pipeline.EvalConfig(xml=small_xml, model_path="ignored.xml"))
@@ -455,25 +460,50 @@ def test_unlabelled_translators_need_the_trust_flag(small_xml, tmp_path, monkeyp
 
 
 @pytest.mark.parametrize(
-    "target, paths",
+    "run, target, paths",
     [
-        ("constrained", {"ccgan": "ccgan", "wcgan": "wcgan", "ccgan_sim": "ccgan_sim"}),
-        ("aged", {"ccgan": "aged", "ccgan_sim": "aged_sim"}),
+        ("rerun_2026-11-26/run", "constrained", {m: m for m in methods.TRANSLATOR_METHODS}),
+        # The rerun made no aged CCGAN-GP, only the distilled one.
+        ("rerun_2026-11-26/run", "aged", {"ccgan_sim": "aged_sim"}),
+        ("run", "constrained", {m: m for m in methods.TRANSLATOR_METHODS}),
+        ("run", "aged", {"ccgan": "aged", "ccgan_sim": "aged_sim"}),
     ],
 )
-def test_committed_translators_are_labelled_for_their_stage(target, paths):
+def test_committed_translators_are_labelled_for_their_stage(run, target, paths):
     """Every committed I-Support translator says what it is, and loads as the chain's table
-    stages give it (their --*-path and --target-domain), with no trust flag."""
+    stages give it (their --*-path and --target-domain), with no trust flag: the rerun's on
+    models/softarm.xml (the defaults), the first run's on the previous arm."""
     from ccgan import label_translators
+    from ccgan.translator import TRANSLATORS_DIR
 
-    run = ROOT / "results" / "paper" / "run"
-    assert label_translators.label_run(run, check=True) == {}
-    arm_hash = _file_hash(label_translators.RUN_MODEL)
+    run = ROOT / "results" / "paper" / run
+    if run == label_translators.RUN_DIR:
+        assert label_translators.label_run(run, check=True) == {}
+        arm_hash = _file_hash(label_translators.RUN_MODEL)
+    else:
+        assert run == TRANSLATORS_DIR
+        arm_hash = _file_hash(constants.DEFAULT_MODEL_PATH)
     given = {f"{m}_path": str(run / folder / "translator.ckpt") for m, folder in paths.items()}
     cfg = pipeline.EvalConfig(seeds=(0, 1, 2), target_domain=target, **given)
     for method in paths:
         tr, why = methods.load_translator(method, cfg)
         assert tr.model_hashes == {arm_hash} and sorted(tr.trained_seeds) == [0, 1, 2], why
+
+
+def test_default_translators_are_refused_for_the_aged_arm(in_tmp):
+    """The default translators translate into D_c, and the default run folder has no aged
+    CCGAN-GP: --target-domain aged without paths stops before any work, naming the flag and
+    both domains, never scoring D_c's translators on the aged arm."""
+    for method in methods.TRANSLATOR_METHODS:
+        with pytest.raises(methods.TranslatorError) as exc:
+            methods.load_translator(method, pipeline.EvalConfig(target_domain="aged"))
+        message = str(exc.value)
+        assert methods.PATH_FLAGS[method] in message and "--target-domain aged" in message
+        assert "'aged'" in message and "'constrained'" in message
+    argv = ["--target-domain", "aged", "--methods", "none", "ccgan_sim", "--shapes", "circle"]
+    with pytest.raises(SystemExit) as exc:
+        shapes.main([*argv, "--duration", "0.5", "--no-robustness", "--out", "out"])
+    assert "--ccgan-sim-path" in str(exc.value.code) and not Path("out").exists()
 
 
 def test_the_robustness_tests_leave_out_the_distilled_translator_unless_asked(in_tmp):
