@@ -145,9 +145,9 @@ class EvalConfig:
     arm's, results/solid/translators/); labelled files are always checked."""
     oracle: OracleConfig = OracleConfig()
     """Oracle settings."""
-    video_fps: int = 15
+    video_fps: int = 12
     """Video frame rate (frames per second of video)."""
-    video_speedup: float = 4.0
+    video_speedup: float = 6.0
     """Simulated seconds per video second."""
     video_panel_hw: tuple[int, int] = (480, 480)
     """Height, width (pixels) of each of the three video panels (at most the model's offscreen
@@ -222,10 +222,29 @@ def default_methods() -> tuple[str, ...]:
     return DEFAULT_METHODS
 
 
+#: The noise levels of the CPU's default noise test: the largest, which the findings report. With
+#: the translators at k = 15 each level costs the robust method 15 rollouts of 15 simulated
+#: minutes (about 2 min on 2 cores), and the three levels put the main job over 10 minutes
+#: (`bench/results/cpu/main_job_fresh_clone.md`).
+CPU_NOISE_STDS = (0.5,)
+
+
+def default_noise_stds() -> tuple[float, ...]:
+    """The noise levels run without --noise-stds: EvalConfig's, or CPU_NOISE_STDS on a CPU."""
+    import jax
+
+    return CPU_NOISE_STDS if jax.default_backend() == "cpu" else EvalConfig.noise_stds
+
+
 def main_job_config() -> EvalConfig:
     """The main job's settings (`python -m eval.shapes --render`), whose outputs are committed in
-    results/: every default, with this machine's default methods."""
-    return EvalConfig(methods=default_methods(), render=True, out_dir=RESULTS_DIR)
+    results/: every default, with this machine's default methods and noise levels."""
+    return EvalConfig(
+        methods=default_methods(),
+        noise_stds=default_noise_stds(),
+        render=True,
+        out_dir=RESULTS_DIR,
+    )
 
 
 def is_main_job(cfg: EvalConfig) -> bool:

@@ -30,10 +30,12 @@ from eval.methods import (
     TranslatorError,
 )
 from eval.pipeline import (
+    CPU_NOISE_STDS,
     RESULTS_DIR,
     RUNS_DIR,
     EvalConfig,
     default_methods,
+    default_noise_stds,
     evaluate,
     is_main_job,
     quick,
@@ -206,6 +208,16 @@ def _add_run_options(p: argparse.ArgumentParser) -> None:
         help="methods of the noise and periodicity tests, where run (of stretch and the"
         " translators; stretch and ccgan_sim each add minutes on 2 cores)",
     )
+    p.add_argument(
+        "--noise-stds",
+        nargs="+",
+        type=float,
+        metavar="STD",
+        default=None,
+        help="noise levels of the noise test (std on pressure / 3.5 bar; default"
+        f" {' '.join(map(str, EvalConfig.noise_stds))}, on a CPU"
+        f" {' '.join(map(str, CPU_NOISE_STDS))})",
+    )
 
 
 def _shown(path: Path) -> str:
@@ -311,6 +323,7 @@ def parse_args(argv: list[str] | None = None) -> EvalConfig:
         except OSError as err:
             p.error(f"--out: {err}")
     methods = default_methods() if a.methods is None else a.methods
+    noise_stds = default_noise_stds() if a.noise_stds is None else a.noise_stds
     horizon = None if a.oracle_horizon is not None and a.oracle_horizon <= 0 else a.oracle_horizon
     try:
         cfg = EvalConfig(
@@ -323,6 +336,7 @@ def parse_args(argv: list[str] | None = None) -> EvalConfig:
             render=a.render,
             robustness=not a.no_robustness,
             robust_methods=tuple(a.robust_methods),
+            noise_stds=tuple(noise_stds),
             out_dir=a.out,
             model_path=a.model,
             ccgan_path=a.ccgan_path,

@@ -10,8 +10,8 @@ ROOT = Path(__file__).resolve().parent.parent
 #: The committed, generated arm model.
 DEFAULT_MODEL_PATH = ROOT / "models" / "softarm.xml"
 #: The earlier arm, whose body bent as a solid 30 mm disc (15x stiffer than the I-Support
-#: section), kept byte for byte: the committed datasets and translators were made with it, and
-#: it is the comparison row of the model page. `ArmParams(section="solid")` regenerates its
+#: section), kept byte for byte: the datasets and translators of results/solid/ were made with
+#: it, and it is the comparison row of the model page. `ArmParams(section="solid")` regenerates its
 #: physics.
 SOLID_MODEL_PATH = ROOT / "models" / "softarm_solid.xml"
 #: The previous I-Support arm, fitted to the reference rod without the stretch (dilatation)

@@ -71,6 +71,21 @@ def test_quick_run_defaults_to_a_new_run_folder_never_results(in_tmp):
     )
 
 
+def test_noise_levels_default_per_machine_and_other_levels_make_a_custom_run(in_tmp):
+    """On a CPU the main job's noise test keeps the largest level (CPU_NOISE_STDS): the default
+    command is still the main job; --noise-stds picks others, in a run folder of its own; a
+    negative level is a usage error before any work."""
+    cfg = shapes.parse_args(["--render"])
+    assert cfg.noise_stds == pipeline.CPU_NOISE_STDS == pipeline.main_job_config().noise_stds
+    assert pipeline.is_main_job(cfg)
+    every = shapes.parse_args(["--noise-stds", "0.1", "0.3", "0.5"])
+    assert every.noise_stds == (0.1, 0.3, 0.5) and not pipeline.is_main_job(every)
+    assert pipeline.output_dir(every).parent == Path(pipeline.RUNS_DIR)
+    with pytest.raises(SystemExit) as refused:
+        shapes.parse_args(["--noise-stds", "-0.1"])
+    assert refused.value.code == 2
+
+
 def test_quick_run_is_marked_and_states_its_arm_and_lengths(in_tmp, capsys):
     """A tiny quick run on the default arm: a run folder, marked plots and report, the I-Support
     arm named, every length from the config, progress bars on stderr."""

@@ -53,8 +53,8 @@ def _panels(frame: np.ndarray) -> list[np.ndarray]:
 def test_frame_size_and_count(rendered):
     _, _, frames, _, _ = rendered
     h, w = pipeline.EvalConfig().video_panel_hw
-    # 30 source steps, one frame every round(10 Hz * 4 / 15 fps) = 3 steps: steps 2, 5, ..., 29.
-    assert frames.shape == (10, h, 3 * w, 3) and frames.dtype == np.uint8
+    # 30 source steps, one frame every round(10 Hz * 6 / 12 fps) = 5 steps: steps 4, 9, ..., 29.
+    assert frames.shape == (6, h, 3 * w, 3) and frames.dtype == np.uint8
     assert min(h, w) >= 480
 
 
