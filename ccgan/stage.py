@@ -119,10 +119,12 @@ def validated_loop(
     progress: bool = True,
     log=print,
     stop=None,
+    start: int = 1,
 ) -> BestIterates:
     """The loop of a fine-tune stage: n steps (or epochs) of training, validated now and then.
 
-    Iteration i = 1..n runs `train_once(i, params, opt_state) -> (params, opt_state, loss [M])`.
+    Iteration i = start..n (start > 1: a run resumed after iteration start - 1) runs
+    `train_once(i, params, opt_state) -> (params, opt_state, loss [M])`.
     After every `config.eval_every`-th iteration, the last, and one that ran out of time, it
     scores the parameters with `validate(i, params) -> score [M]` (cm), keeps each member's best
     iterate and calls `report(best)` (unless None; e.g. to write the best iterates, so that a
@@ -141,7 +143,9 @@ def validated_loop(
     """
     from tqdm.auto import tqdm
 
-    bar = tqdm(range(1, n + 1), disable=not progress, desc=desc, unit=unit)
+    bar = tqdm(
+        range(start, n + 1), disable=not progress, desc=desc, unit=unit, initial=start - 1, total=n
+    )
     for i in bar:
         params, opt_state, loss = train_once(i, params, opt_state)
         if not np.isfinite(loss).all():

@@ -345,3 +345,54 @@ def test_teacher_data_adds_the_babbling_family(arms, tmp_path):
     assert data["c_train"].shape == (2, 5, 3) and np.isfinite(data["teacher_val_x_err_cm"]).all()
     with pytest.raises(distill.ConfigError, match="n_train_babble"):
         dataclasses.replace(config, batch_size=3)
+
+
+def test_a_stopped_distillation_goes_on_from_its_next_epoch(arms, tmp_path):
+    """Stopped after epoch 2 of 4 (SIGTERM's event, set at epoch 1's validation: training stops
+    after the next epoch), a run keeps its training state; the same call then trains epochs 3-4
+    only, and ends where an unstopped run ends, bit for bit. A state saved under other settings
+    is not used."""
+    import threading
+
+    every = dataclasses.replace(TINY, eval_every=1)  # the same validations, stopped or not
+
+    arm_s, arm_c = arms
+    shipped = load_translator()
+    cache, state = tmp_path / "teacher.npz", tmp_path / "training_state.npz"
+    whole, whole_history = distill.distill(
+        [shipped], arm_s, arm_c, every, cache=cache, progress=False, log=lambda _: None
+    )
+    stop = threading.Event()
+
+    def stop_after_first_report(best, hist):
+        stop.set()
+
+    _, stopped = distill.distill(
+        [shipped], arm_s, arm_c, every, cache=cache, progress=False, log=lambda _: None,
+        on_validation=stop_after_first_report, stop=stop, resume=state,
+    )  # fmt: skip
+    assert not stopped["complete"] and len(stopped["train_loss"]) == 2 and state.exists()
+    logs = []
+    resumed, history = distill.distill(
+        [shipped], arm_s, arm_c, every, cache=cache, progress=False, log=logs.append,
+        resume=state,
+    )  # fmt: skip
+    assert any("2 of 4 epochs done" in line for line in logs)
+    assert history["complete"] and not state.exists()
+    assert history["train_loss"] == whole_history["train_loss"]
+    assert history["best_epoch"] == whole_history["best_epoch"]
+    for got, want in zip(jax.tree.leaves(resumed[0]), jax.tree.leaves(whole[0]), strict=True):
+        np.testing.assert_array_equal(got, want)
+    # Saved for 6 epochs, read by a run of 4: trained afresh, from epoch 1.
+    stop.clear()
+    six = dataclasses.replace(every, epochs=6)
+    distill.distill(
+        [shipped], arm_s, arm_c, six, cache=cache, progress=False, log=lambda _: None,
+        on_validation=stop_after_first_report, stop=stop, resume=state,
+    )  # fmt: skip
+    logs.clear()
+    _, afresh = distill.distill(
+        [shipped], arm_s, arm_c, every, cache=cache, progress=False, log=logs.append,
+        resume=state,
+    )  # fmt: skip
+    assert any("other settings" in line for line in logs) and len(afresh["train_loss"]) == 4
