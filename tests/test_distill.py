@@ -15,9 +15,12 @@ from mjx_arm import constants
 from mjx_arm.programs import shape_like_programs
 from tracking.metrics import position_error_cm
 
+# k = 5, not the committed translators' 15: a third of the simulation, and nothing here depends
+# on k.
 TINY = distill.DistillConfig(
-    n_train=4, n_val=2, duration_s=1.0, epochs=4, batch_size=2, eval_every=2, learning_rate=3e-3
-)
+    n_train=4, n_val=2, duration_s=1.0, epochs=4, batch_size=2, eval_every=2, learning_rate=3e-3,
+    hold_factor=5,
+)  # fmt: skip
 
 
 @pytest.fixture(scope="module")
@@ -67,15 +70,15 @@ def test_distill_imitates_the_teacher_and_caches_it(arms, tmp_path):
 
     # The score, recomputed from the returned parameters in MuJoCo C.
     logs.clear()
-    data = distill.teacher_data(TINY, arm_s, arm_c, shipped.k, cache, log=logs.append)
+    data = distill.teacher_data(TINY, arm_s, arm_c, TINY.hold_factor, cache, log=logs.append)
     assert all("read from" in line for line in logs) and len(logs) == 2
     np.testing.assert_array_equal(distill.held_out_programs(TINY).astype(np.float32), data["p_val"])
     # Stretch only on the same held-out programs: the D_s commands held k periods in D_c.
-    k = shipped.k
+    k = TINY.hold_factor
     held = arm_c.rollout(np.repeat(data["p_val"], k, axis=1), backend="c")[:, k - 1 :: k]
     want = position_error_cm(held, data["x_val"]).mean()
     assert np.isclose(history["stretch_val_x_err_cm"]["whole"], want, rtol=1e-6)
-    tuned = dataclasses.replace(shipped, g_c_params=params[0])
+    tuned = dataclasses.replace(shipped, g_c_params=params[0], k=TINY.hold_factor)
     x_val = data["x_val"].astype(np.float64)
     pairs = zip(data["p_val"], x_val, strict=True)
     cmds = np.stack([tuned.translate(p, x)[0][:: tuned.k] for p, x in pairs])
@@ -86,20 +89,30 @@ def test_distill_imitates_the_teacher_and_caches_it(arms, tmp_path):
     # The cache grows: more programs plan only the new ones, which match a fresh plan.
     logs.clear()
     more = distill.teacher_data(
-        dataclasses.replace(TINY, n_train=5, n_val=1), arm_s, arm_c, shipped.k, cache, logs.append
+        dataclasses.replace(TINY, n_train=5, n_val=1),
+        arm_s,
+        arm_c,
+        TINY.hold_factor,
+        cache,
+        logs.append,
     )
     assert "read from" in logs[0] and more["p_val"].shape[0] == 1
     assert logs[1].startswith("teacher (c): 1 new train programs of 1.0 s")
     np.testing.assert_array_equal(more["c_train"][:4], data["c_train"])
     fresh = distill.teacher_data(
-        dataclasses.replace(TINY, n_train=5, n_val=1), arm_s, arm_c, shipped.k, None, logs.append
+        dataclasses.replace(TINY, n_train=5, n_val=1),
+        arm_s,
+        arm_c,
+        TINY.hold_factor,
+        None,
+        logs.append,
     )
     np.testing.assert_allclose(fresh["c_train"][4], more["c_train"][4], atol=1e-6)
     # Full-amplitude programs follow each split's own programs.
     logs.clear()
     both = distill.teacher_data(
         dataclasses.replace(TINY, n_train=5, n_val=1, n_train_full=2, n_val_full=1),
-        arm_s, arm_c, shipped.k, cache, logs.append,
+        arm_s, arm_c, TINY.hold_factor, cache, logs.append,
     )  # fmt: skip
     assert both["p_train"].shape[0] == 7 and both["p_val"].shape[0] == 2
     np.testing.assert_array_equal(both["c_train"][:5], more["c_train"])
@@ -109,11 +122,11 @@ def test_distill_imitates_the_teacher_and_caches_it(arms, tmp_path):
     # Other settings or a corrupt file: planned again, never mixed.
     logs.clear()
     other = dataclasses.replace(TINY, duration_s=0.5, n_val=1)
-    again = distill.teacher_data(other, arm_s, arm_c, shipped.k, cache, log=logs.append)
+    again = distill.teacher_data(other, arm_s, arm_c, TINY.hold_factor, cache, log=logs.append)
     assert "other settings" in logs[0] and again["p_val"].shape == (1, 5, 3)
     cache.write_bytes(b"not an npz")
     logs.clear()
-    distill.teacher_data(other, arm_s, arm_c, shipped.k, cache, log=logs.append)
+    distill.teacher_data(other, arm_s, arm_c, TINY.hold_factor, cache, log=logs.append)
     assert "unreadable" in logs[0] and np.load(cache)["p_val"].shape[0] == 1
 
 
@@ -161,7 +174,7 @@ def test_teacher_cache_keeps_each_split_planned_before_a_stop(arms, tmp_path, mo
     """A run stopped while planning the held-out split (a deadline's SIGTERM) keeps the training
     split's commands, and the rerun plans only the held-out split."""
     arm_s, arm_c = arms
-    k = load_translator().k
+    k = TINY.hold_factor
     config = dataclasses.replace(TINY, n_train=2, n_val=1, duration_s=0.5)
     cache = tmp_path / "teacher.npz"
     track = distill.mpc.track
@@ -190,7 +203,7 @@ def test_mjx_teacher_plans_in_shards_as_the_c_teacher(arms, tmp_path):
     """The teacher on the accelerator (`tracking.mpc_mjx`), a shard of programs per call: its
     cache has its own key, and its commands track as well as the C teacher's."""
     arm_s, arm_c = arms
-    k = load_translator().k
+    k = TINY.hold_factor
     one_step = dataclasses.replace(TINY, n_train=2, n_val=1, duration_s=0.5, iterations=1)
     on_mjx = dataclasses.replace(one_step, teacher_backend="mjx", teacher_shard=1)
     cache = tmp_path / "teacher.npz"
@@ -244,7 +257,7 @@ def test_a_teacher_planned_without_translators_teaches_another_run(tmp_path, mon
     """A chain plans its teacher while the translators train: --teacher-only with --hold-factor
     and no --translators, then the distillation starts from that cache (--teacher-from) and
     plans nothing; a cache of other settings, or a run without translators, is refused."""
-    k = load_translator().k
+    k = TINY.hold_factor
     common = ["--n-train", "2", "--n-val", "1", "--duration-s", "0.3", "--batch-size", "2"]
     common += ["--hold-factor", str(k)]
     with pytest.raises(SystemExit) as no_k:
