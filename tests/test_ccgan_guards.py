@@ -566,6 +566,7 @@ def test_f_c_on_its_own_data_and_windows_serves_only_runs_that_ask_for_them(
     assert "--forward-window" in err
 
 
+@pytest.mark.slow  # about 2 min on 2 cores (docs/testing.md)
 def test_sigterm_stops_training_after_its_epoch_with_a_checkpoint(
     tmp_path, files, small_arm, monkeypatch
 ):

@@ -20,6 +20,7 @@ def arms():
     return mjx_arm.load(xml=xml, domain="source"), mjx_arm.load(xml=xml, domain="constrained")
 
 
+@pytest.mark.slow  # about 2 min on 2 cores (docs/testing.md)
 def test_finetune_lowers_the_window_error_and_writes_a_translator(arms, tmp_path):
     arm_s, arm_c = arms
     shipped = load_translator(SOLID_CCGAN, trust_unlabelled=True)  # its files have no labels
