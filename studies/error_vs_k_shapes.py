@@ -28,7 +28,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from bench import write_results  # noqa: E402
+from bench import run_header, write_results  # noqa: E402
 from ccgan.cli import cli_parser  # noqa: E402
 
 #: The methods an `eval.shapes` table must hold, by the names this study gives them.
@@ -109,6 +109,7 @@ def main(argv=None) -> None:
     names = list(next(iter(shapes.values())))
 
     body = [
+        "",
         "Held-out: the 16 programs of 60 s that picked each distillation's iterate"
         " (studies.distill_runs; teacher: one-step tracker in MJX). Shapes: the five shapes"
         " over 60 s (eval.shapes at that k; teacher: the table's tracker, MuJoCo C). X_err in"
@@ -145,7 +146,7 @@ def main(argv=None) -> None:
                 f" ({r['ccgan_sim'] / r['stretch']:.2f})"
             )
         body.append(f"| {shape} | " + " | ".join(cells) + " |")
-    header = {"command": " ".join(["python -m studies.error_vs_k_shapes", *(argv or [])])}
+    header = run_header("studies.error_vs_k_shapes", argv)
     result = {
         "runs": {str(k): [str(d), str(s)] for k, (d, s) in runs.items()},
         "held_out": {str(k): held[k] for k in ks},
