@@ -445,6 +445,7 @@ def rollout_program(
     rest_qvel: jnp.ndarray,
     warp_host_model: mujoco.MjModel | None = None,
     controls: stretch.ChamberControls | None = None,
+    unroll: int = 1,
 ):
     """One program [T, 3] (bar) -> poses [T, 6] and ok flags [T], in pure JAX.
 
@@ -463,6 +464,7 @@ def rollout_program(
       warp_host_model: for an MJX-Warp `mjx_model` (`put_model(..., impl="warp")`), the host
         `mujoco.MjModel` it came from: MJX-Warp's `make_data` refuses an `mjx.Model`. It only
         sizes the data (any domain of the arm will do); qpos and qvel become the rest state.
+      unroll: physics steps per iteration of the loop over a period's steps (`control_period`).
     """
     dtype = commands_bar.dtype
     if warp_host_model is None:
@@ -479,6 +481,7 @@ def rollout_program(
         n_substeps=n_substeps,
         valve_params=valve_params,
         controls=controls,
+        unroll=unroll,
     )
     _, (poses, ok) = jax.lax.scan(control_step, (data, p0, jnp.array(True)), commands)
     return poses, ok
@@ -498,13 +501,16 @@ def control_period(
     n_substeps: int,
     valve_params: valve.ValveParams,
     controls: stretch.ChamberControls | None = None,
+    unroll: int = 1,
 ):
     """One control period in pure JAX, as a `jax.lax.scan` body:
     `step((data, pressure [3] bar, healthy), command [3] bar) -> ((data, pressure, healthy),
     (pose [6], healthy))`, the command already saturated (`valve.saturate`).
 
     `rollout_program` scans it from rest; `tracking.mpc_mjx` scans it from any state, to plan
-    from the middle of a program. The arguments are `rollout_program`'s.
+    from the middle of a program. The arguments are `rollout_program`'s; `unroll` physics steps
+    run per iteration of the loop over the period's steps (the same numbers; on a GPU, fewer and
+    longer loop iterations: `bench.step_latency` measures what that changes).
     """
     actuators = jnp.asarray(actuators)
     timestep = mjx_model.opt.timestep
@@ -523,7 +529,7 @@ def control_period(
     def control_step(carry, command):
         data, pressure, healthy = carry
         pressures = valve.substep_pressures(pressure, command, n_substeps, timestep, valve_params)
-        data, _ = jax.lax.scan(physics_step, data, pressures)
+        data, _ = jax.lax.scan(physics_step, data, pressures, unroll=unroll)
         pose = jnp.concatenate([data.site_xpos[tip_site], data.site_xmat[tip_site][:, 2]])
         finite = jnp.isfinite(data.qpos).all() & jnp.isfinite(data.qvel).all()
         healthy = healthy & finite & (jnp.abs(data.qvel).max() < MAX_JOINT_SPEED)
