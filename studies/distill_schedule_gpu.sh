@@ -4,12 +4,13 @@
 # same teachers' commands, with another batch size or more optimiser steps. What it answers:
 # does a larger batch (the step is latency-bound on the GPU, so it costs about the same) or a
 # longer training close the gap to the 752-program, 5,520-step run (docs/distillation.md,
-# "Batch and steps")? Everything is picked on the 16 held-out 60 s programs; no shape is seen.
+# "Batch, steps, and the aged pair's k")? And at which k does the aged pair belong? Everything
+# is picked on the 16 held-out 60 s programs; no shape is seen (table_aged:RUN scores one).
 #
 # Call sequence (nvidia-h100-x1, timeout_s 600), back to back while the machine is warm:
-#   1. carry [".whl-extra1", ".teacher_cache"]: bash studies/distill_schedule_gpu.sh
-#      (stages half the wheels and the two teacher caches; the tree leaves ~17 MiB a call)
-#   2. carry [".whl-extra2"]: bash studies/distill_schedule_gpu.sh RUN...
+#   1. carry [".whl-extra1", ".teacher_cache/c"]: bash studies/distill_schedule_gpu.sh
+#      (stages half the wheels and a teacher cache; the tree leaves ~17 MiB a call)
+#   2. carry [".whl-extra2", ".teacher_cache/aged"]: bash studies/distill_schedule_gpu.sh RUN...
 #   3. bash studies/distill_schedule_gpu.sh RUN...  (each RUN goes on where the last call
 #      stopped it: ccgan.distill keeps its training state at --max-wall-s)
 # .teacher_cache/{c,aged}/teacher.npz: the chain's teacher_c and teacher_aged caches (240 + 16
