@@ -5,7 +5,7 @@
 # does a larger batch (the step is latency-bound on the GPU, so it costs about the same) or a
 # longer training close the gap to the 752-program, 5,520-step run (docs/distillation.md,
 # "Batch, steps, and the aged pair's k")? And at which k does the aged pair belong? Everything
-# is picked on the 16 held-out 60 s programs; no shape is seen (table_aged:RUN scores one).
+# is picked on the 16 held-out 60 s programs; table_aged:RUN scores the shapes of a chosen run.
 #
 # Call sequence (nvidia-h100-x1, timeout_s 600), back to back while the machine is warm:
 #   1. carry [".whl-extra1", ".teacher_cache/c"]: bash studies/distill_schedule_gpu.sh
