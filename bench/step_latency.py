@@ -7,7 +7,8 @@ and the distillation's held-out scoring (`docs/chain.md`, "The 30-minute chain")
 is the latency of one physics step times the steps in sequence, whatever the batch. This times
 `mjx_arm.arm.rollout_program` (jitted, vmapped over `--batch` programs of `--periods` control
 periods, every command random) for each `--unrolls` value, after one call that compiles it; the
-poses must equal those of the first row (same arithmetic, another loop). XLA_FLAGS set before
+poses must equal those of the first row to float32 rounding (the same arithmetic in another
+loop, which XLA may fuse otherwise). XLA_FLAGS set before
 the run (e.g. command buffers for the loop) apply to every row and are recorded.
 
     python -m bench.step_latency --out bench/results/h100/step_latency          # on a GPU

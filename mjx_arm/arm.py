@@ -509,8 +509,8 @@ def control_period(
 
     `rollout_program` scans it from rest; `tracking.mpc_mjx` scans it from any state, to plan
     from the middle of a program. The arguments are `rollout_program`'s; `unroll` physics steps
-    run per iteration of the loop over the period's steps (the same numbers; on a GPU, fewer and
-    longer loop iterations: `bench.step_latency` measures what that changes).
+    run per iteration of the loop over the period's steps (the same numbers to float32 rounding;
+    on a GPU, fewer and longer loop iterations: `bench.step_latency` measures what that changes).
     """
     actuators = jnp.asarray(actuators)
     timestep = mjx_model.opt.timestep

@@ -1,4 +1,4 @@
-"""bench.step_latency: an unrolled physics loop gives the same poses, and the bench says so."""
+"""bench.step_latency: an unrolled physics loop gives the same poses to float32 rounding."""
 
 import json
 
@@ -15,7 +15,7 @@ def test_an_unrolled_loop_steps_the_same_arm(tmp_path):
          + ["--out", str(out)])  # fmt: skip
     rows = json.loads(out.with_suffix(".json").read_text())["rows"]
     assert [row["unroll"] for row in rows] == [1, 2]
-    assert rows[1]["tip_diff_mm"] == 0.0
+    assert rows[1]["tip_diff_mm"] < 1e-5  # float32 rounding of other fusions: 3e-8 mm seen
     assert all(row["ms_per_step"] > 0 and row["compile_s"] > 0 for row in rows)
     assert out.with_suffix(".md").read_text().count("\n| ") == 3  # header and two rows
 
