@@ -30,7 +30,6 @@ import numpy as np
 import mjx_arm
 from bench import run_header, write_results
 from ccgan.cli import cli_parser
-from mjx_arm.arm import rollout_program
 
 
 def time_rollout(arm, commands: np.ndarray, unroll: int, repeats: int) -> dict:
@@ -39,13 +38,7 @@ def time_rollout(arm, commands: np.ndarray, unroll: int, repeats: int) -> dict:
     Returns {"unroll", "compile_s" (first call), "wall_s" (best of `repeats` calls),
     "ms_per_step" (wall over T x substeps sequential physics steps), "poses" [B, T, 6]}.
     """
-    fn = functools.partial(
-        rollout_program,
-        rest_qpos=jnp.asarray(arm.rest_qpos),
-        rest_qvel=jnp.asarray(arm.rest_qvel),
-        unroll=unroll,
-        **arm.period_kwargs(),
-    )
+    fn = functools.partial(arm.rollout_fn(), unroll=unroll)  # rollout_program, bound to the arm
     run = jax.jit(jax.vmap(fn, in_axes=(None, 0)))
     batch = jnp.asarray(commands, dtype=jnp.float32)
     t0 = time.perf_counter()

@@ -120,9 +120,11 @@ def main(argv=None) -> None:
         " | / tracker | / stretch |",
         "|" + "---|" * 12,
     ]
+    shape_means = {
+        k: {m: float(np.mean([shapes[k][s][m] for s in names])) for m in SHAPE_METHODS} for k in ks
+    }
     for k in ks:
-        h = held[k]
-        mean = {m: float(np.mean([shapes[k][s][m] for s in names])) for m in SHAPE_METHODS}
+        h, mean = held[k], shape_means[k]
         seeds = " / ".join(f"{x:.3f}" for x in h["per_seed"])
         body.append(
             f"| {k} | {60 * k} | {h['stretch']:.3f} | {h['teacher']:.4f} | {h['mean']:.3f}"
@@ -160,7 +162,7 @@ def main(argv=None) -> None:
     left.plot(ks, [held[k]["mean"] for k in ks], "*-", markersize=10, label="distilled at k")
     left.set_title("16 held-out programs of 60 s")
     for m, label in SHAPE_METHODS.items():
-        means = [np.mean([shapes[k][s][m] for s in names]) for k in ks]
+        means = [shape_means[k][m] for k in ks]
         right.plot(ks, means, {"stretch": "o-", "mpc": "s-", "ccgan_sim": "*-"}[m], label=label)
     right.set_title("the five shapes, mean")
     for ax in (left, right):
