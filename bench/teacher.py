@@ -44,8 +44,18 @@ def main(argv=None) -> None:
         " XLA use TensorFloat32 for float32 products on NVIDIA GPUs since Ampere, 'highest'"
         " keeps them float32 (no difference on the CPU)",
     )
+    p.add_argument(
+        "--substeps",
+        type=int,
+        nargs="+",
+        default=[0],
+        help="physics steps per control period of the arm the MJX tracker plans in, one row set"
+        " each (0: the arm's own; others: `Arm.planning_copy`); every row is scored in the arm",
+    )
     p.add_argument("--out", required=True, help="output prefix (writes .json and .md)")
     a = p.parse_args(argv)
+    if min(a.substeps) < 0:
+        p.error("--substeps must be >= 0")
     if a.c_programs < 1 or min(a.mjx_programs) < a.c_programs:
         p.error("--c-programs must be >= 1 and at most every --mjx-programs")
     arm_s = mjx_arm.load(a.model, "source")
@@ -62,14 +72,16 @@ def main(argv=None) -> None:
     scored["C"], _ = mpc.track(arm_c, targets[:n_c], a.k, programs[:n_c], cfg, progress=True)
     wall = time.perf_counter() - t0
     rows.append({"backend": "C", "programs": n_c, "wall_s": wall, "first_chunk_s": None})
-    for precision in a.matmul_precisions:
+    for precision, substeps in [(p_, s_) for p_ in a.matmul_precisions for s_ in a.substeps]:
         name = "MJX" if precision == "default" else f"MJX, matmul precision {precision}"
+        name += f", planned in {substeps} steps per period" if substeps else ""
+        plan_arm = arm_c.planning_copy(substeps) if substeps else arm_c
         for n in sorted(a.mjx_programs):
             package = mjx_arm.arm.MJX_MATMUL_PRECISION
             mjx_arm.arm.MJX_MATMUL_PRECISION = None if precision == "default" else precision
             try:
                 commands, info = mpc_mjx.track(
-                    arm_c, targets[:n], a.k, programs[:n], cfg, progress=True
+                    plan_arm, targets[:n], a.k, programs[:n], cfg, progress=True
                 )
             finally:
                 mjx_arm.arm.MJX_MATMUL_PRECISION = package

@@ -122,6 +122,15 @@ class DistillConfig:
     """Where the teacher plans: "c" (`tracking.mpc`, MuJoCo C on the host's cores, any horizon)
     or "mjx" (`tracking.mpc_mjx`, every program at once on the accelerator, horizon 1); its
     commands are scored in MuJoCo C either way. `bench.teacher` measures which is faster."""
+    generator_unroll: int = 1
+    """LSTM time steps per loop iteration of G_c's scans while it trains and is scored (the
+    numerics are unchanged; `bench.distill_step` measures the speed). A whole 60 s program is
+    600 sequential steps per layer, forward and backward."""
+    teacher_substeps: int = 0
+    """Physics steps per control period of the arm the teacher plans in (0: the arm's own, 25 of
+    4 ms). A planning copy (`mjx_arm.Arm.planning_copy`) with 5 runs five times fewer sequential
+    steps; its commands are still scored in the arm itself (`studies.planning_arm` measures what
+    the coarser arm costs the teacher)."""
     teacher_shard: int = 0
     """Programs the teacher plans per call, across splits, the cache written after each (0: a
     split per call), so that a run stopped at a deadline keeps the shards it finished; with
@@ -156,6 +165,8 @@ class DistillConfig:
                 "max_wall_s": 0,
                 "hold_factor": 0,
                 "teacher_shard": 0,
+                "teacher_substeps": 0,
+                "generator_unroll": 1,
                 "final_lr_factor": 0,
             },
             above={"head_weight": 0, "learning_rate": 0},
@@ -192,6 +203,8 @@ class DistillConfig:
             key["teacher_backend"] = self.teacher_backend
             # TensorFloat32 plans (before MJX_MATMUL_PRECISION) are not reused
             key["mjx_matmul_precision"] = mjx_arm_arm.MJX_MATMUL_PRECISION
+        if self.teacher_substeps:  # caches planned in the arm itself keep their key
+            key["teacher_substeps"] = self.teacher_substeps
         return key
 
 
@@ -340,6 +353,7 @@ def teacher_data(
     if config.teacher_backend == "mjx":
         partial = None if cache is None else cache.with_name(cache.stem + "_partial.npz")
         track, resumable = mpc_mjx.track, {"resume": partial, "should_stop": should_stop}
+    plan_arm = arm_c.planning_copy(config.teacher_substeps) if config.teacher_substeps else arm_c
     pending = []  # (split, its programs not planned yet), in the splits' order
     for split, n, family in splits:
         have = len(store.get(f"p_{split}", ()))
@@ -355,7 +369,7 @@ def teacher_data(
         t0 = time.perf_counter()
         programs = np.concatenate([piece for _, piece in shard])
         targets = arm_s.rollout(programs, backend="c")
-        commands, _ = track(arm_c, targets, k, programs, mpc_cfg, progress=progress, **resumable)
+        commands, _ = track(plan_arm, targets, k, programs, mpc_cfg, progress=progress, **resumable)
         new = {"p": programs, "x": targets, "c": commands[:, k - 1 :: k]}
         first = 0
         for split, piece in shard:
@@ -622,6 +636,18 @@ def _load_training(path: Path, key: str, params, opt_state, log):
         return None
 
 
+def with_generator_unroll(translators: list[Translator], unroll: int) -> list[Translator]:
+    """The translators with G_c's LSTM scans unrolled `unroll` steps per loop iteration (the
+    same parameters and numerics; a file written afterwards records the generator's shape, not
+    the unroll)."""
+    return [
+        dataclasses.replace(t, generator=t.generator.clone(unroll=unroll))
+        if t.generator.unroll != unroll
+        else t
+        for t in translators
+    ]
+
+
 def distill(
     translators: list[Translator],
     arm_s,
@@ -663,6 +689,7 @@ def distill(
     k = config.hold_factor or common_k(translators)
     n_train = config.n_train_programs  # >= batch_size (DistillConfig checks)
     t0 = time.perf_counter()
+    translators = with_generator_unroll(translators, config.generator_unroll)
 
     should_stop = _stop_check(config, t0, stop)
     data = imitation_data(

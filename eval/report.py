@@ -264,6 +264,12 @@ def _oracle_table(results: dict) -> list[str]:
             f" {min(loss_best):.4f}-{max(loss_best):.4f} (cm^2), so a longer optimisation"
             " may lower it further and raise every ratio."
         )
+    if oracle_cfg.get("substeps"):
+        effort += (
+            f" Adam differentiated through a copy of the arm with {oracle_cfg['substeps']}"
+            " physics steps per control period (its loss picked the iterate); the errors"
+            " above are those of its commands in the arm itself."
+        )
     return _pair_table(
         "Ratio to the oracle (mean X_err / oracle mean X_err; mean phi_err / oracle's),"
         " over the window the oracle optimised; the oracle's commands were "

@@ -15,6 +15,8 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
+import shutil
 import sys
 import time
 from pathlib import Path
@@ -40,6 +42,7 @@ from eval.pipeline import (
     is_main_job,
     quick,
 )
+from eval.simulate import MPC_RESULT, ORACLE_PROGRESS, ORACLE_START
 from mjx_arm import constants, programs, run_folder
 from mjx_arm.programs import (
     AMPLITUDE_BAR,
@@ -111,7 +114,12 @@ FLAGS = {
     "oracle.learning_rate": "--oracle-lr",
     "oracle.init": "--oracle-init",
     "oracle.horizon_s": "--oracle-horizon",
+    "oracle.substeps": "--oracle-substeps",
 }
+
+
+#: The files a run keeps in its folder to resume (`eval.simulate`), which `--caches-from` reads.
+RESUME_CACHES = (MPC_RESULT, ORACLE_START, ORACLE_PROGRESS)
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -168,6 +176,15 @@ def _add_run_options(p: argparse.ArgumentParser) -> None:
         default=None,
         help=f"output folder (default: {RESULTS_DIR}/ for the main job, else a new"
         f" {RUNS_DIR}/<quick|custom>-<time>/)",
+    )
+    p.add_argument(
+        "--caches-from",
+        metavar="DIR",
+        default=None,
+        help="start from another run folder's resume caches (the tracker's commands, the"
+        " oracle's start and progress; with --out): each is linked into --out unless --out has"
+        " its own, and one made with other settings is not used. A chain plans the oracle in"
+        " an early stage and the table reads it",
     )
     p.add_argument(
         "--backend",
@@ -310,6 +327,14 @@ def _add_oracle_options(p: argparse.ArgumentParser) -> None:
         default=OracleConfig.horizon_s,
         help="seconds optimised by the oracle; <= 0 for the whole program",
     )
+    p.add_argument(
+        "--oracle-substeps",
+        metavar="N",
+        type=int,
+        default=OracleConfig.substeps,
+        help="physics steps per control period of the arm the oracle differentiates through"
+        " (0: the arm's own; its commands are scored in the arm itself): studies.planning_arm",
+    )
 
 
 def parse_args(argv: list[str] | None = None) -> EvalConfig:
@@ -350,6 +375,7 @@ def parse_args(argv: list[str] | None = None) -> EvalConfig:
                 horizon_s=horizon,
                 held=not a.oracle_per_period,
                 init=a.oracle_init,
+                substeps=a.oracle_substeps,
             ),
         )
         cfg = quick(cfg) if a.quick else cfg
@@ -377,6 +403,9 @@ def main(argv: list[str] | None = None) -> dict:
     from mjx_arm.machine import enable_compilation_cache
 
     cfg = parse_args(argv)
+    caches_from = build_parser().parse_args(argv).caches_from
+    if caches_from is not None and cfg.out_dir is None:
+        build_parser().error("--caches-from needs --out")
     folder = cfg.out_dir
     if folder is None and is_main_job(cfg):
         folder = RESULTS_DIR
@@ -387,6 +416,12 @@ def main(argv: list[str] | None = None) -> dict:
         except run_folder.FolderBusyError as err:
             build_parser().error(f"--out: {err}")
     try:
+        if caches_from is not None:
+            try:
+                adopted = adopt_caches(Path(caches_from), Path(folder))
+            except FileNotFoundError as err:
+                build_parser().error(f"--caches-from: {err}")
+            print(f"caches from {caches_from}: {', '.join(adopted) or 'none new'}")
         earlier = _listed_outputs(folder)
         enable_compilation_cache()
         command = "python -m eval.shapes " + " ".join(sys.argv[1:] if argv is None else argv)
@@ -405,6 +440,34 @@ def main(argv: list[str] | None = None) -> dict:
         if lock is not None:
             lock.release()
     return results
+
+
+def adopt_caches(source: Path, folder: Path) -> list[str]:
+    """Links (or copies) the resume caches (`RESUME_CACHES`) of the run folder `source` into
+    `folder`, each unless `folder` has its own. Returns the names adopted.
+
+    A cache holds the fingerprint of what made it (arm, targets, start, k, settings), and a run
+    with other settings ignores it and computes afresh, so adopting one never changes a result.
+
+    Raises:
+      FileNotFoundError: `source` is not a folder or holds none of the caches.
+    """
+    if not source.is_dir() or not any((source / n).is_file() for n in RESUME_CACHES):
+        raise FileNotFoundError(f"{source} holds none of {', '.join(RESUME_CACHES)}")
+    folder.mkdir(parents=True, exist_ok=True)
+    adopted = []
+    for name in RESUME_CACHES:
+        if not (source / name).is_file() or (folder / name).exists():
+            continue
+        tmp = folder / f".{name}.tmp"
+        tmp.unlink(missing_ok=True)
+        try:  # caches are only ever replaced whole (write_atomically), never written in place
+            os.link(source / name, tmp)
+        except OSError:
+            shutil.copyfile(source / name, tmp)
+        tmp.replace(folder / name)
+        adopted.append(name)
+    return adopted
 
 
 def _listed_outputs(folder) -> set[str]:

@@ -46,6 +46,11 @@ class OracleConfig:
     init: str = "mpc"
     """Where Adam starts: "mpc" (the receding-horizon tracker's commands, `tracking.mpc`) or
     "stretch" (the stretch program)."""
+    substeps: int = 0
+    """Physics steps per control period of the arm Adam differentiates through (0: the arm's
+    own, 25 of 4 ms): a planning copy (`mjx_arm.Arm.planning_copy`) with 5 takes five times
+    fewer sequential steps. The best iterate is picked by its loss in that copy; the caller
+    scores the commands in the arm itself (`eval.pipeline` does)."""
 
     def __post_init__(self):
         """Refuses settings that would fail (or mean nothing) after minutes of work; fields are
@@ -56,6 +61,7 @@ class OracleConfig:
             f"must be 'mpc' or 'stretch', got {self.init!r}",
         )
         check_ints("oracle.steps", self.steps, 1)
+        check_ints("oracle.substeps", self.substeps, 0)
         if self.horizon_s is not None:
             check_duration("oracle.horizon_s", self.horizon_s, constants.CONTROL_HZ)
         try:
@@ -280,6 +286,8 @@ def _fingerprint(arm_c, targets, inits, held, k: int, cfg: OracleConfig) -> str:
     for array in (targets, inits, held):
         digest.update(np.ascontiguousarray(array).tobytes())
     settings = dataclasses.asdict(cfg) | {"steps": None}
+    if not cfg.substeps:  # progress kept before the field existed stays valid
+        settings.pop("substeps")
     digest.update(repr((arm_c.model_hash, k, settings)).encode())
     return digest.hexdigest()[:16]
 
@@ -308,7 +316,7 @@ def oracle_commands(
     commands. A free program has a command per control period.
 
     Args:
-      arm_c: the D_c arm.
+      arm_c: the D_c arm (its planning copy when `cfg.substeps` is set).
       target_poses: [T, 6] or [S, T, 6] target poses (m, unit d3).
       init_commands: [T * k, 3] or [S, T * k, 3] starting commands (bar), e.g. the stretch
         program.
@@ -334,10 +342,11 @@ def oracle_commands(
     # normalised steps move them out again however flat the sigmoid is there.
     frac = np.clip((inits - lo) / (hi - lo), 1e-4, 1 - 1e-4)
     z0 = jnp.asarray(np.log(frac / (1 - frac)), dtype=jnp.float32)
-    update, opt, commands_of = _adam_step(arm_c, targets, held, k, cfg)
+    plan_arm = arm_c.planning_copy(cfg.substeps) if cfg.substeps else arm_c
+    update, opt, commands_of = _adam_step(plan_arm, targets, held, k, cfg)
     t0 = time.perf_counter()
     path = None if progress_path is None else Path(progress_path)
-    fingerprint = _fingerprint(arm_c, targets, inits, held, k, cfg)
+    fingerprint = _fingerprint(plan_arm, targets, inits, held, k, cfg)
     best_z, best_loss, history, step_wall_s = _best_iterates(
         update, opt, z0, cfg.steps, progress, path, fingerprint
     )
