@@ -98,6 +98,11 @@ class TrainConfig:
     k_choice_programs: str = "babbling"
     #: Shape-like programs drawn when k_choice_programs is "shape_like".
     k_choice_n_programs: int = 12
+    #: Physics steps per control period of the arm k_choice "simulator" scores in (0: the arm's
+    #: own, 25 of 4 ms; 5: a planning copy, `mjx_arm.Arm.planning_copy`, five times fewer steps
+    #: and 0.01 mm from the arm on average over held programs, `studies.planning_arm`). The
+    #: scores only choose k and the kept epoch; every reported error is the arm's own.
+    k_choice_substeps: int = 0
     #: Control steps per held-out window when k_choice is "forward" (0 = whole trajectories).
     #: Each window starts F_c from the recorded pose, so the windows run in parallel: the
     #: choice costs val_window_length * k_max sequential F_c periods instead of T_val * k_max.
@@ -163,6 +168,7 @@ class TrainConfig:
                 "val_window_length": 0,
                 "k_choice_seconds": 0,
                 "k_choice_n_programs": 1,
+                "k_choice_substeps": 0,
                 "gen_unroll": 1,
                 "feedback_unroll": 1,
                 "checkpoint_every": 1,

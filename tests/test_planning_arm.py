@@ -132,3 +132,19 @@ def test_a_table_adopts_an_earlier_stage_s_caches_but_keeps_its_own(tmp_path, ca
     with pytest.raises(SystemExit):
         shapes.main(["--caches-from", str(source)])
     assert "--caches-from needs --out" in capsys.readouterr().err
+
+
+def test_ccgan_train_scores_k_in_the_copy_when_asked(monkeypatch):
+    from types import SimpleNamespace
+
+    from ccgan import sim_choice, train
+    from ccgan.config import TrainConfig
+
+    made = []
+    monkeypatch.setattr(sim_choice, "SimulatorChoice", lambda arm, *a, **kw: made.append(arm))
+    args = SimpleNamespace(model="models/softarm.xml", no_progress=True)
+    d_c = SimpleNamespace(domain="constrained", model_hash=mjx_arm.load().model_hash)
+    for substeps, want in ((0, 25), (5, 5)):
+        config = TrainConfig(k_choice_substeps=substeps)
+        train.simulator_choice_from_args(None, args, config, None, d_c)
+        assert made[-1].n_substeps == want and made[-1].domain.name == "constrained"
