@@ -77,8 +77,9 @@ def main(argv=None) -> None:
     lines = [
         f"# Oracle cost: Adam steps through the MJX rollout ({report['device']}, {report['cpu']})",
         "",
-        f"Command: `{command}`; jax {jax.__version__}; D_c arm, {arm_c.n_substeps} physics steps "
-        "per control period, k control periods per source step.",
+        f"Command: `{command}`; jax {jax.__version__}; D_c arm, {arm_c.n_substeps} physics steps"
+        " per control period (a planning copy's where the row says fewer), k control periods per"
+        " source step.",
         "",
         "| horizon (s) | programs | steps per period | physics steps each"
         " | first step incl. compile (s) | s / Adam step | X_err in the arm, cm |",
