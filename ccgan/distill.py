@@ -131,6 +131,11 @@ class DistillConfig:
     4 ms). A planning copy (`mjx_arm.Arm.planning_copy`) with 5 runs five times fewer sequential
     steps; its commands are still scored in the arm itself (`studies.planning_arm` measures what
     the coarser arm costs the teacher)."""
+    score_substeps: int = 0
+    """Physics steps per control period of the arm the held-out programs are scored in, which
+    picks the kept iterate (0: the arm's own, 25 of 4 ms). A planning copy of 5 scores five
+    times faster (MuJoCo C): the chain's scorings of 48 programs of 900-1,500 simulated s took
+    about 40 s each in the arm, four per run (`docs/chain.md`)."""
     teacher_shard: int = 0
     """Programs the teacher plans per call, across splits, the cache written after each (0: a
     split per call), so that a run stopped at a deadline keeps the shards it finished; with
@@ -166,6 +171,7 @@ class DistillConfig:
                 "hold_factor": 0,
                 "teacher_shard": 0,
                 "teacher_substeps": 0,
+                "score_substeps": 0,
                 "generator_unroll": 1,
                 "final_lr_factor": 0,
             },
@@ -309,6 +315,12 @@ def adopt_teacher(source: Path, cache: Path, key: str) -> bool:
     return True
 
 
+def scoring_arm(config: DistillConfig, arm_c):
+    """The arm the held-out programs are scored in: arm_c, or its planning copy of
+    `config.score_substeps` steps per control period."""
+    return arm_c.planning_copy(config.score_substeps) if config.score_substeps else arm_c
+
+
 def teacher_data(
     config: DistillConfig,
     arm_s,
@@ -396,7 +408,8 @@ def teacher_data(
                 if split.split("_")[0] == joined and n > 0
             ]
             data[f"{part}_{joined}"] = np.concatenate(pieces)
-    poses = arm_c.rollout(np.repeat(data["c_val"], k, axis=1), backend="c")[:, k - 1 :: k]
+    score_arm = scoring_arm(config, arm_c)
+    poses = score_arm.rollout(np.repeat(data["c_val"], k, axis=1), backend="c")[:, k - 1 :: k]
     data["teacher_val_x_err_cm"] = position_error_cm(poses, data["x_val"]).mean(-1)
     return data
 
@@ -696,7 +709,8 @@ def distill(
         config, translators[0], arm_s, arm_c, k, cache, log, progress, should_stop
     )
     step, stacked, opt_state = init_imitation(translators, config, data)
-    validate = make_validation(translators[0], arm_c, k, data)
+    score_arm = scoring_arm(config, arm_c)
+    validate = make_validation(translators[0], score_arm, k, data)
     key = _resume_key(config, k, stacked)
     saved = None if resume is None else _load_training(resume, key, stacked, opt_state, log)
 
@@ -708,7 +722,7 @@ def distill(
 
     if saved is None:
         first = 1
-        history = _new_history(arm_c, k, data)
+        history = _new_history(score_arm, k, data)
         best = BestIterates.start(stacked, validate_epoch(0, stacked))
         rng = np.random.default_rng(config.seed)
     else:

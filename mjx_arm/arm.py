@@ -126,7 +126,9 @@ class Arm:
         The D_c media are so damped that the arm barely feels its timestep: at 5 steps of 20 ms
         the tip of a held 60 s program moves 0.01 mm from the 4 ms arm's on average (0.2 mm at
         most; `studies.planning_arm`). A receding-horizon planner or the oracle run five times
-        fewer sequential steps in such a copy; their commands are scored in this arm.
+        fewer sequential steps in such a copy; their commands are scored in this arm. Another
+        arm may feel its step more (the 3-segment test arm does): measure a copy first
+        (`python -m studies.planning_arm --model ...`).
 
         Raises:
           ValueError: substeps < 1. SimulationDivergedError: as `load`, e.g. a domain with a

@@ -178,3 +178,34 @@ def test_finetune_runs_its_gradient_through_the_copy(small_xml, monkeypatch):
     assert seen[0].n_substeps == 5 and seen[0].model_hash == arm_c.model_hash + "-s5"
     with pytest.raises(finetune.ConfigError, match="sim_substeps"):
         dataclasses.replace(config, sim_substeps=-1)
+
+
+def test_distill_scores_its_held_out_programs_in_the_copy(arm_c, tmp_path, monkeypatch):
+    """On the committed arm (the 3-segment test arm is far stiffer for its inertia, and a copy
+    of 5 steps moves it differently)."""
+    from ccgan import load_translator
+
+    arm_s = mjx_arm.load(domain="source")
+    config = distill.DistillConfig(
+        n_train=2, n_val=1, duration_s=0.5, epochs=1, batch_size=2, eval_every=1, hold_factor=5,
+        score_substeps=5,
+    )  # fmt: skip
+    scored_in = []
+    make_validation = distill.make_validation
+
+    def spy(translator, arm, *args):
+        scored_in.append(arm.n_substeps)
+        return make_validation(translator, arm, *args)
+
+    monkeypatch.setattr(distill, "make_validation", spy)
+    cache = tmp_path / "teacher.npz"
+    shipped = load_translator()
+    _, in_copy = distill.distill([shipped], arm_s, arm_c, config, cache=cache, progress=False)
+    plain = dataclasses.replace(config, score_substeps=0)
+    _, in_arm = distill.distill([shipped], arm_s, arm_c, plain, cache=cache, progress=False)
+    assert scored_in == [5, 25]
+    copy_x, arm_x = in_copy["teacher_val_x_err_cm"], in_arm["teacher_val_x_err_cm"]
+    assert copy_x["whole"] == pytest.approx(arm_x["whole"], rel=0.05)
+    assert copy_x["whole"] != arm_x["whole"]  # scored in another arm
+    with pytest.raises(distill.ConfigError, match="score_substeps"):
+        dataclasses.replace(config, score_substeps=-1)
