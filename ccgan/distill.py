@@ -593,6 +593,8 @@ def _resume_key(config: DistillConfig, k: int, start_params) -> str:
 
     h = hashlib.sha256()
     settings = dataclasses.asdict(config) | {"max_wall_s": None, "k": k}
+    if not config.score_substeps:  # states saved before the field existed stay valid
+        settings.pop("score_substeps")
     h.update(json.dumps(settings, sort_keys=True).encode())
     for leaf in jax.tree.leaves(start_params):
         h.update(np.ascontiguousarray(np.asarray(leaf)).tobytes())
