@@ -221,7 +221,8 @@ def write(chain: Chain, config: dict, config_path: Path) -> Path:
         "",
         "The schedule was fixed in the config before any shape was scored. Every iterate was"
         " picked on held-out programs inside its command; the five shapes were used only for the"
-        " tables below.",
+        " tables below (and for their references that need no translator, the tracker and the"
+        " oracle, where a stage plans them early).",
         "",
         "## Stages",
         "",
