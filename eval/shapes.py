@@ -183,7 +183,8 @@ def _add_run_options(p: argparse.ArgumentParser) -> None:
         default=None,
         help="start from another run folder's resume caches (the tracker's commands, the"
         " oracle's start and progress; with --out): each is linked into --out unless --out has"
-        " its own, and one made with other settings is not used. A chain plans the oracle in"
+        " its own, and one made from other inputs (to the bit: targets simulated on another"
+        " CPU may differ) is not used. A chain plans the oracle in"
         " an early stage and the table reads it (default: none, every cache made here)",
     )
     p.add_argument(
