@@ -5,8 +5,8 @@ vmaps them) and planning copy (`--substeps`: physics steps per control period of
 differentiates through, 0 for the arm's own), times the first call (compile + one step) and the
 mean of the next steps, with the stretch program as start. The programs are held-out
 shape-like ones (split "oracle_bench"; the committed `bench/results/h200/oracle.md` was timed on
-the first test shapes, before X_err was reported). The first step includes compiling the gradient. X_err is that of the best
-commands in the arm itself (MuJoCo C), over the horizon.
+the first test shapes, before X_err was reported). The first step includes compiling the
+gradient. X_err is that of the best commands in the arm itself (MuJoCo C), over the horizon.
 
     python -m bench.oracle --horizons 1 2 --programs 1 5 --steps 4 --out bench/results/h200
     python -m bench.oracle --horizons 2 --programs 5 --k 15 --substeps 0 5 --steps 6 --out OUT
