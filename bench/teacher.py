@@ -75,7 +75,7 @@ def main(argv=None) -> None:
     for precision, substeps in [(p_, s_) for p_ in a.matmul_precisions for s_ in a.substeps]:
         name = "MJX" if precision == "default" else f"MJX, matmul precision {precision}"
         name += f", planned in {substeps} steps per period" if substeps else ""
-        plan_arm = arm_c.planning_copy(substeps) if substeps else arm_c
+        plan_arm = arm_c.planning_copy(substeps)
         for n in sorted(a.mjx_programs):
             package = mjx_arm.arm.MJX_MATMUL_PRECISION
             mjx_arm.arm.MJX_MATMUL_PRECISION = None if precision == "default" else precision

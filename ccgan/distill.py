@@ -38,8 +38,6 @@ import argparse
 import dataclasses
 import hashlib
 import json
-import os
-import shutil
 import signal
 import sys
 import threading
@@ -62,7 +60,7 @@ from ccgan.stage import (
 )
 from ccgan.translator import Translator
 from mjx_arm import arm as mjx_arm_arm
-from mjx_arm.atomic import write_atomically
+from mjx_arm.atomic import link_or_copy, write_atomically
 from mjx_arm.babble import BabbleConfig
 from mjx_arm.programs import babble_programs, shape_like_programs
 from tracking import mpc, mpc_mjx
@@ -304,21 +302,8 @@ def adopt_teacher(source: Path, cache: Path, key: str) -> bool:
         raise ValueError(f"{source} is not a teacher cache ({err})") from err
     if stored != key:
         raise ValueError(f"{source} was planned with other settings: {stored}, this run: {key}")
-    cache.parent.mkdir(parents=True, exist_ok=True)
-    tmp = cache.with_name(cache.name + ".tmp")
-    tmp.unlink(missing_ok=True)
-    try:  # a hard link: no second copy on disk or in a packed run folder; the cache is only
-        os.link(source, tmp)  # ever replaced whole (write_atomically), never written in place
-    except OSError:
-        shutil.copyfile(source, tmp)
-    tmp.replace(cache)
+    link_or_copy(source, cache)
     return True
-
-
-def scoring_arm(config: DistillConfig, arm_c):
-    """The arm the held-out programs are scored in: arm_c, or its planning copy of
-    `config.score_substeps` steps per control period."""
-    return arm_c.planning_copy(config.score_substeps) if config.score_substeps else arm_c
 
 
 def teacher_data(
@@ -365,7 +350,7 @@ def teacher_data(
     if config.teacher_backend == "mjx":
         partial = None if cache is None else cache.with_name(cache.stem + "_partial.npz")
         track, resumable = mpc_mjx.track, {"resume": partial, "should_stop": should_stop}
-    plan_arm = arm_c.planning_copy(config.teacher_substeps) if config.teacher_substeps else arm_c
+    plan_arm = arm_c.planning_copy(config.teacher_substeps)
     pending = []  # (split, its programs not planned yet), in the splits' order
     for split, n, family in splits:
         have = len(store.get(f"p_{split}", ()))
@@ -408,7 +393,7 @@ def teacher_data(
                 if split.split("_")[0] == joined and n > 0
             ]
             data[f"{part}_{joined}"] = np.concatenate(pieces)
-    score_arm = scoring_arm(config, arm_c)
+    score_arm = arm_c.planning_copy(config.score_substeps)
     poses = score_arm.rollout(np.repeat(data["c_val"], k, axis=1), backend="c")[:, k - 1 :: k]
     data["teacher_val_x_err_cm"] = position_error_cm(poses, data["x_val"]).mean(-1)
     return data
@@ -711,7 +696,7 @@ def distill(
         config, translators[0], arm_s, arm_c, k, cache, log, progress, should_stop
     )
     step, stacked, opt_state = init_imitation(translators, config, data)
-    score_arm = scoring_arm(config, arm_c)
+    score_arm = arm_c.planning_copy(config.score_substeps)
     validate = make_validation(translators[0], score_arm, k, data)
     key = _resume_key(config, k, stacked)
     saved = None if resume is None else _load_training(resume, key, stacked, opt_state, log)

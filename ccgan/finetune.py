@@ -448,7 +448,7 @@ def finetune(
     data = finetune_data(config, arm_s, tr.bounds, log)
     members = member_grid(len(translators), config)
     opt, trained, opt_state, anchor_weights = init_members(translators, members, config)
-    sim_arm = arm_c.planning_copy(config.sim_substeps) if config.sim_substeps else arm_c
+    sim_arm = arm_c.planning_copy(config.sim_substeps)
     step = make_finetune_step(tr, sim_arm, k, config, data.window_steps, opt)
     validate = make_validation(tr, arm_c, k, data)
     history = _new_history(members) | {"k": int(k)}

@@ -629,8 +629,7 @@ def simulator_choice_from_args(parser, args, config: TrainConfig, data: Translat
             f"--k-choice simulator scores k on {arm.path} (model hash {arm.model_hash}), but the"
             f" data come from an arm with hash {d_c.model_hash}: pass that arm's MJCF as --model"
         )
-    if config.k_choice_substeps:
-        arm = arm.planning_copy(config.k_choice_substeps)
+    arm = arm.planning_copy(config.k_choice_substeps)
     label = None if args.no_progress else "k in the simulator"
     source_arm = None
     if config.k_choice_programs == "shape_like":

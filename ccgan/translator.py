@@ -252,7 +252,8 @@ class Translator:
     @functools.cached_property
     def _generator_jit(self):
         """G_c's apply, jitted once per translator (compiled once per program length): run
-        op by op, its LSTM scans took 0.8 s per 60 s program on a 2-core CPU."""
+        op by op, the main job's commands took 33 s on a 2-core CPU, jitted 2.8 s
+        (`bench/results/cpu/main_job_fresh_clone.md`)."""
         return jax.jit(self.generator.apply)
 
     def translate(self, pressures_s, poses_s) -> tuple[np.ndarray, int]:

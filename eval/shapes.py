@@ -15,8 +15,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
-import shutil
 import sys
 import time
 from pathlib import Path
@@ -44,6 +42,7 @@ from eval.pipeline import (
 )
 from eval.simulate import MPC_RESULT, ORACLE_PROGRESS, ORACLE_START
 from mjx_arm import constants, programs, run_folder
+from mjx_arm.atomic import link_or_copy
 from mjx_arm.programs import (
     AMPLITUDE_BAR,
     CHAMBER_ANGLES_RAD,
@@ -458,16 +457,9 @@ def adopt_caches(source: Path, folder: Path) -> list[str]:
     folder.mkdir(parents=True, exist_ok=True)
     adopted = []
     for name in RESUME_CACHES:
-        if not (source / name).is_file() or (folder / name).exists():
-            continue
-        tmp = folder / f".{name}.tmp"
-        tmp.unlink(missing_ok=True)
-        try:  # caches are only ever replaced whole (write_atomically), never written in place
-            os.link(source / name, tmp)
-        except OSError:
-            shutil.copyfile(source / name, tmp)
-        tmp.replace(folder / name)
-        adopted.append(name)
+        if (source / name).is_file() and not (folder / name).exists():
+            link_or_copy(source / name, folder / name)
+            adopted.append(name)
     return adopted
 
 

@@ -105,6 +105,7 @@ class Arm:
     inertia_scale: float
     model_hash: str
     mjcf_text: str = dataclasses.field(default="", repr=False, compare=False)
+    _copies: dict = dataclasses.field(default_factory=dict, repr=False, compare=False)
 
     @functools.cached_property
     def mjx_model(self) -> mjx.Model:
@@ -121,7 +122,8 @@ class Arm:
 
     def planning_copy(self, substeps: int) -> Arm:
         """This arm with `substeps` physics steps per 0.1 s control period (a longer timestep),
-        for planners only: `load(..., substeps=substeps)` of the same MJCF and domain.
+        for planners only: `load(..., substeps=substeps)` of the same MJCF and domain, made once
+        per step count and kept. 0 gives this arm itself (the settings' "no copy").
 
         The D_c media are so damped that the arm barely feels its timestep: at 5 steps of 20 ms
         the tip of a held 60 s program moves 0.01 mm from the 4 ms arm's on average (0.2 mm at
@@ -134,9 +136,12 @@ class Arm:
           ValueError: substeps < 1. SimulationDivergedError: as `load`, e.g. a domain with a
           fixed `inertia_scale` too small for the longer step.
         """
-        if self.path is not None:
-            return load(self.path, self.domain, substeps=substeps)
-        return load(domain=self.domain, xml=self.mjcf_text, substeps=substeps)
+        if substeps == 0:
+            return self
+        if substeps not in self._copies:
+            source = {"path": self.path} if self.path is not None else {"xml": self.mjcf_text}
+            self._copies[substeps] = load(domain=self.domain, substeps=substeps, **source)
+        return self._copies[substeps]
 
     @property
     def tip_site_id(self) -> int:

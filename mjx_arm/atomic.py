@@ -99,3 +99,18 @@ def fsync_dir(folder: Path) -> None:
         os.fsync(fd)
     finally:
         os.close(fd)
+
+
+def link_or_copy(source: Path, dest: Path) -> Path:
+    """Puts the file `source` at `dest` whole or not at all: a hard link where the file system
+    allows (no second copy on disk or in a packed run folder), else a copy. For caches that are
+    only ever replaced whole (`write_atomically`), never written in place. Returns dest."""
+    dest.parent.mkdir(parents=True, exist_ok=True)
+    tmp = dest.with_name(f".{dest.name}.tmp")
+    tmp.unlink(missing_ok=True)
+    try:
+        os.link(source, tmp)
+    except OSError:
+        shutil.copyfile(source, tmp)
+    tmp.replace(dest)
+    return dest

@@ -25,6 +25,7 @@ def test_a_planning_copy_steps_less_and_moves_as_the_arm(arm_c):
     copy = arm_c.planning_copy(5)
     assert (copy.n_substeps, copy.timestep_s) == (5, pytest.approx(0.02))
     assert copy.model_hash == arm_c.model_hash + "-s5" and copy.domain == arm_c.domain
+    assert arm_c.planning_copy(5) is copy and arm_c.planning_copy(0) is arm_c  # kept; 0: itself
     # The automatic inertia scale follows the longer step (explicit Euler stays stable).
     assert copy.inertia_scale > 4 * arm_c.inertia_scale
     program = np.repeat(validation_program(duration_s=4.0), 5, axis=0)

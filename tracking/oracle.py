@@ -342,7 +342,7 @@ def oracle_commands(
     # normalised steps move them out again however flat the sigmoid is there.
     frac = np.clip((inits - lo) / (hi - lo), 1e-4, 1 - 1e-4)
     z0 = jnp.asarray(np.log(frac / (1 - frac)), dtype=jnp.float32)
-    plan_arm = arm_c.planning_copy(cfg.substeps) if cfg.substeps else arm_c
+    plan_arm = arm_c.planning_copy(cfg.substeps)
     update, opt, commands_of = _adam_step(plan_arm, targets, held, k, cfg)
     t0 = time.perf_counter()
     path = None if progress_path is None else Path(progress_path)
