@@ -7,7 +7,7 @@
 #
 # Each call: installs the carried wheels (bench/device/install.sh); restores the run folder from
 # a carried .paper_state/paper_state.tar.gz when the machine does not hold it already; runs
-# `python -m experiments.paper --out $TMP/paper --jobs ${JOBS:-4} --deadline-s ${DEADLINE_S:-500}`
+# `python -m experiments.paper --out $TMP/paper --jobs ${JOBS:-6} --deadline-s ${DEADLINE_S:-500}`
 # (up to JOBS stages at once, of which one training per GPU: the config's "gpu" stages take
 # turns; a stage stopped at the deadline keeps its folder and continues
 # in the next call); puts into $OUT the whole run folder as paper_state.tar.gz.part-NN (pieces of
@@ -74,17 +74,17 @@ nvidia-smi --query-gpu=timestamp,utilization.gpu,memory.used --format=csv,nohead
   >>"$TMP/gpu_use.csv" 2>/dev/null &
 sampler=$!
 # Several GPUs: each stage gets one (--devices), and as many stages run as there are GPUs, at
-# least 4.
+# least 6 (at the start: both babblings, both teachers and the oracle, then forward).
 n_gpus=$(nvidia-smi -L 2>/dev/null | grep -c '^GPU' || true)
 devices=()
 if ((n_gpus > 1)); then
   devices=(--devices $(seq 0 $((n_gpus - 1))))
-  JOBS=${JOBS:-$((n_gpus > 4 ? n_gpus : 4))}
+  JOBS=${JOBS:-$((n_gpus > 6 ? n_gpus : 6))}
 fi
 # STAGES="a b ..." runs only those stages (their inputs must be done or among them).
 only=()
 [[ -n ${STAGES:-} ]] && only=(--stage $STAGES)
-$PY -m experiments.paper --out "$RUN_DIR" --config "$CONFIG" --jobs "${JOBS:-4}" "${devices[@]}" \
+$PY -m experiments.paper --out "$RUN_DIR" --config "$CONFIG" --jobs "${JOBS:-6}" "${devices[@]}" \
   "${only[@]}" --deadline-s "${DEADLINE_S:-500}" 2>&1 |
   tee -a "$TMP/paper_log.txt"
 rc=${PIPESTATUS[0]}
