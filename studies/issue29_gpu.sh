@@ -95,10 +95,12 @@ PYEOF
   ;;
 finetune)
   # ccgan.finetune (feedback through the MJX simulator) from the chain's CCGAN-GP, carried in
-  # .finetune_in/ (translator_seed{0,1,2}.ckpt of runs/paper/ccgan); ccgan.finetune flags follow.
+  # .finetune_in/ (translator_seed{0,1,2}.ckpt of the chain's ccgan stage); ccgan.finetune flags
+  # follow. FINETUNE_NAME names its folder in $RUN (default: finetune).
   shift
   timeout $((570 - (SECONDS - start))) $PY -m ccgan.finetune --model $MODEL \
-    --translators .finetune_in/translator_seed{0,1,2}.ckpt --seeds 0 1 2 --out "$RUN/finetune" "$@"
+    --translators .finetune_in/translator_seed{0,1,2}.ckpt --seeds 0 1 2 \
+    --out "$RUN/${FINETUNE_NAME:-finetune}" "$@"
   pack
   ;;
 *)
