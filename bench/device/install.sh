@@ -1,10 +1,10 @@
 # Sourced ON THE GPU MACHINE by bench/device/on_device.sh and experiments/device.sh, from the
 # repository root of the copy sent there: installs what the call carried, no network needed.
 #
-# (1) stages the carried wheel folders: .whl/ or its two halves .whl-extra1/ and .whl-extra2/ (for
-#     a tree too large to travel beside the whole .whl: mujoco and glfw in one, mujoco-mjx, pyopengl
-#     and trimesh in the other, each with a copy of .whl/SHA256SUMS; carried in two calls while
-#     the machine stays warm) -> $TMP/whl/, .whl-warpN/ -> $TMP/wp/;
+# (1) stages the carried wheel folders: .whl/ or, for a tree too large to travel beside the whole
+#     .whl, its pieces .whl-extra1/ ... .whl-extraN/ (bench/device/cut_wheels.sh; or whole wheels
+#     in two halves, as before), carried in consecutive calls while the machine stays warm
+#     -> $TMP/whl/, .whl-warpN/ -> $TMP/wp/;
 # (2) installs the mujoco wheels once (sha256 checked) with
 #     pip install --no-index --no-deps --target $TMP/site;
 # (3) once $TMP/wp holds every piece of the warp-lang wheel (the joined file's sha256 matches),
@@ -28,13 +28,32 @@ if compgen -G ".whl/*.whl" >/dev/null; then
   cp -f .whl/* "$WHL/"
   echo "staged $(ls .whl/*.whl | wc -l) mujoco wheels"
 fi
-# .whl cut in two (.whl-extra1, .whl-extra2, each with a copy of SHA256SUMS) for a tree too large
-# to travel beside the whole .whl: staged call by call, installed once every wheel is here.
+# .whl cut for a tree too large to travel beside the whole .whl, staged call by call: either
+# whole wheels (.whl-extra1, .whl-extra2, each with a copy of SHA256SUMS), or byte pieces of a tar
+# of .whl (bench/device/cut_wheels.sh: wheels.tar.part-*, wheels.sha256, n_pieces), unpacked into
+# $WHL once all pieces are here and the joined tar matches its sha256.
 for dir in .whl-extra[0-9]*; do
   [[ -d $dir ]] || continue
-  cp -f "$dir"/* "$WHL/"
-  echo "staged $(ls "$dir"/*.whl | wc -l) mujoco wheel(s) from $dir"
+  if compgen -G "$dir/wheels.tar.part-*" >/dev/null; then
+    mkdir -p "$TMP/whl_parts" && cp -f "$dir"/* "$TMP/whl_parts/"
+    echo "staged wheel piece(s) $(cd "$dir" && ls -- wheels.tar.part-* | tr '\n' ' ')from $dir"
+  else
+    cp -f "$dir"/* "$WHL/"
+    echo "staged $(ls "$dir"/*.whl | wc -l) mujoco wheel(s) from $dir"
+  fi
 done
+if [[ -f $TMP/whl_parts/wheels.sha256 ]] && ! compgen -G "$WHL/*.whl" >/dev/null; then
+  want=$(cat "$TMP/whl_parts/n_pieces")
+  have=$(compgen -G "$TMP/whl_parts/wheels.tar.part-*" | wc -l)
+  if ((have == want)); then
+    cat "$TMP"/whl_parts/wheels.tar.part-* >"$TMP/whl_parts/wheels.tar"
+    (cd "$TMP/whl_parts" && sha256sum -c --quiet wheels.sha256) \
+      || { echo "the joined wheel pieces do not match their sha256"; exit 1; }
+    tar -xf "$TMP/whl_parts/wheels.tar" -C "$WHL" && rm -f "$TMP/whl_parts/wheels.tar"
+  else
+    echo "wheel pieces staged so far: $have of $want"
+  fi
+fi
 for dir in .whl-warp[0-9]*; do
   [[ -d $dir ]] || continue
   cp -f "$dir"/* "$WP/"
