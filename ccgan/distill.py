@@ -24,7 +24,7 @@ stage, with "method": "distill"; earlier stages stay in "finetune_earlier"), rew
 validation ("complete": false until the run ends), so a killed run keeps its best iterates.
 
     python -m ccgan.distill \\
-        --translators results/paper/rerun_2026-11-26/run/ccgan/translator_seed{0,1,2}.ckpt \\
+        --translators results/paper/rerun_2026-11-27/run/ccgan/translator_seed{0,1,2}.ckpt \\
         --seeds 0 1 2 --hold-factor 15 --out runs/ccgan_distilled
 
 As `ccgan.finetune`, the CLI simulates the arm of `--model` (default the I-Support arm,

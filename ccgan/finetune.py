@@ -38,7 +38,7 @@ pose bounds; the fine-tuning settings and history added to their metadata), name
 `ccgan.load_translator` and `python -m eval.shapes --ccgan-sim-path`.
 
     python -m ccgan.finetune \\
-        --translators results/paper/rerun_2026-11-26/run/ccgan/translator_seed{0,1,2}.ckpt \\
+        --translators results/paper/rerun_2026-11-27/run/ccgan/translator_seed{0,1,2}.ckpt \\
         --seeds 0 1 2 --out runs/ccgan_ft
 
 The CLI simulates the arm of `--model` (default `mjx_arm.constants.TRANSLATOR_MODEL_PATH`,

@@ -28,7 +28,7 @@ _RESULTS = Path(__file__).resolve().parent.parent / "results"
 #: `mjx_arm.constants.TRANSLATOR_MODEL_PATH`): the run folder of the chain's rerun
 #: (`python -m experiments.paper`), one folder per stage (ccgan, wcgan, ccgan_sim, aged_sim; the
 #: rerun made no aged CCGAN-GP).
-TRANSLATORS_DIR = _RESULTS / "paper" / "rerun_2026-11-26" / "run"
+TRANSLATORS_DIR = _RESULTS / "paper" / "rerun_2026-11-27" / "run"
 #: The previous I-Support arm's translators (models/softarm_linear.xml, the linear law), the
 #: chain's first run (stages ccgan, wcgan, ccgan_large, ccgan_sim, aged, aged_sim), kept for
 #: comparison.

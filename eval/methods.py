@@ -11,11 +11,11 @@ Methods:
            asked for (--ccgan-path etc.) must load, or the run stops before any work.
   ccgan_sim  the CCGAN-GP translator fine-tuned in the simulator (`ccgan.finetune` through the
            MJX rollout, then `ccgan.distill` by imitation of `tracking.mpc`; docs/training.md):
-           results/paper/rerun_2026-11-26/run/ccgan_sim/translator.ckpt or --ccgan-sim-path;
+           results/paper/rerun_2026-11-27/run/ccgan_sim/translator.ckpt or --ccgan-sim-path;
            the project's best translator, so the main job shows it beside CCGAN-GP and stretch
            only.
   wcgan    the WCGAN-GP baseline translator: a translator checkpoint given by --wcgan-path or
-           found at results/paper/rerun_2026-11-26/run/wcgan/translator.ckpt.
+           found at results/paper/rerun_2026-11-27/run/wcgan/translator.ckpt.
   mpc      receding-horizon tracking in the D_c simulator itself (`tracking.mpc.track`, MuJoCo C,
            k = the stretch k): at every source step the next command is planned by Gauss-Newton
            on the simulated tracking error and applied. Not a translator (it needs the D_c

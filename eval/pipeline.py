@@ -58,7 +58,7 @@ RUNS_DIR = "runs"
 #: constants.DEFAULT_MODEL_PATH).
 ARM_NOTE = (
     "the I-Support arm under the paper's Cosserat law (the default model), on which the"
-    " committed translators (results/paper/rerun_2026-11-26/run/) were trained"
+    " committed translators (results/paper/rerun_2026-11-27/run/) were trained"
 )
 #: What the report says of the arm at constants.LINEAR_LAW_MODEL_PATH.
 LINEAR_ARM_NOTE = (

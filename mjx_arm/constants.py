@@ -18,7 +18,7 @@ SOLID_MODEL_PATH = ROOT / "models" / "softarm_solid.xml"
 #: factors of the paper's Cosserat law, kept byte for byte: its chain run, results/paper/run/
 #: (babbling data, translators and tables), was made with it and is kept as history.
 LINEAR_LAW_MODEL_PATH = ROOT / "models" / "softarm_linear.xml"
-#: The arm the committed I-Support translators (results/paper/rerun_2026-11-26/run/) were
+#: The arm the committed I-Support translators (results/paper/rerun_2026-11-27/run/) were
 #: trained on by the chain's rerun, and so the default arm of every command that scores or
 #: refines them (eval.shapes, the fine-tune stages).
 TRANSLATOR_MODEL_PATH = DEFAULT_MODEL_PATH

@@ -352,7 +352,7 @@ def test_default_arm_is_the_isupport_one_and_model_path_is_used(small_xml, tmp_p
     described = pipeline.model_description(pipeline.EvalConfig())
     assert described["file"] == "models/softarm.xml" and described["note"] == pipeline.ARM_NOTE
     assert "paper's Cosserat law" in described["note"]
-    assert "results/paper/rerun_2026-11-26/run/" in described["note"]
+    assert "results/paper/rerun_2026-11-27/run/" in described["note"]
     linear = pipeline.model_description(
         pipeline.EvalConfig(model_path=str(constants.LINEAR_LAW_MODEL_PATH))
     )
@@ -477,9 +477,9 @@ def test_unlabelled_translators_need_the_trust_flag(small_xml, tmp_path, monkeyp
 @pytest.mark.parametrize(
     "run, target, paths",
     [
-        ("rerun_2026-11-26/run", "constrained", {m: m for m in methods.TRANSLATOR_METHODS}),
+        ("rerun_2026-11-27/run", "constrained", {m: m for m in methods.TRANSLATOR_METHODS}),
         # The rerun made no aged CCGAN-GP, only the distilled one.
-        ("rerun_2026-11-26/run", "aged", {"ccgan_sim": "aged_sim"}),
+        ("rerun_2026-11-27/run", "aged", {"ccgan_sim": "aged_sim"}),
         ("run", "constrained", {m: m for m in methods.TRANSLATOR_METHODS}),
         ("run", "aged", {"ccgan": "aged", "ccgan_sim": "aged_sim"}),
     ],
