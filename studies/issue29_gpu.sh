@@ -5,8 +5,9 @@
 # every call returns all of it as $OUT/issue29.tar.gz (unpack into studies/results/<machine>/).
 #
 # Call sequence (one H100 or H200, timeout_s 600), back to back while the machine is warm:
-#   1. carry [".whl-extra1"]: bash studies/issue29_gpu.sh install
-#   2. carry [".whl-extra2"]: bash studies/issue29_gpu.sh forward
+#   1. carry [".whl-extra1"]: bash studies/issue29_gpu.sh install (and so on for each piece of
+#      bench/device/cut_wheels.sh but the last)
+#   2. carry [the last ".whl-extraN"]: bash studies/issue29_gpu.sh forward
 #      babbling on the host's cores (MuJoCo C): "scale" (400 x 60 s per domain, the paper's
 #      0.5-3 s holds) and "long" (400 x 120 s in D_c, 1-40 s holds); then the F_c runs.
 #   3. carry [".finetune_in"]: bash studies/issue29_gpu.sh finetune [ccgan.finetune flags]
