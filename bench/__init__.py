@@ -20,8 +20,10 @@ def run_header(module: str, argv: list[str] | None) -> dict:
 
     device = jax.devices()[0]
     args = argv if argv is not None else sys.argv[1:]
+    # On a CPU the kind is the platform again ("cpu"): name it once.
+    kind = device.device_kind
     return {
-        "device": f"{device.platform}: {device.device_kind}",
+        "device": device.platform if kind == device.platform else f"{device.platform}: {kind}",
         "cpu": cpu_model(),
         "jax": jax.__version__,
         "command": " ".join([f"python -m {module}", *args]),

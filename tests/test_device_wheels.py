@@ -1,5 +1,6 @@
-"""The wheels cut into byte pieces for the device (bench/device/cut_wheels.sh) come back whole
-there (bench/device/install.sh), only once every piece has come, and a bad piece is refused."""
+"""The device helpers: the wheels cut into byte pieces (bench/device/cut_wheels.sh) come back
+whole there (bench/device/install.sh) only once every piece has come, and a bad piece is refused;
+the machine line of the benches' result files."""
 
 import hashlib
 import os
@@ -83,3 +84,21 @@ def test_wheels_cut_into_pieces_are_joined_on_the_device_once_all_have_come(tmp_
     call = _call(device, tmp, stub)
     assert call.returncode == 1 and "do not match" in call.stdout
     assert not list(staged.glob("*.whl"))
+
+
+def test_run_header_names_a_cpu_once_and_a_gpu_by_its_kind(monkeypatch):
+    """The header's device line: "cpu" on a CPU (not "cpu: cpu"), "gpu: <kind>" on a GPU."""
+    import jax
+
+    import bench
+
+    class Device:
+        def __init__(self, platform, kind):
+            self.platform, self.device_kind = platform, kind
+
+    monkeypatch.setattr(jax, "devices", lambda: [Device("cpu", "cpu")])
+    assert bench.run_header("bench.x", ["--a"])["device"] == "cpu"
+    monkeypatch.setattr(jax, "devices", lambda: [Device("gpu", "NVIDIA H100 80GB HBM3")])
+    header = bench.run_header("bench.x", ["--a"])
+    assert header["device"] == "gpu: NVIDIA H100 80GB HBM3"
+    assert header["command"] == "python -m bench.x --a"
