@@ -41,6 +41,7 @@
 # the run folder too; commit what docs/chain.md names.
 set -uo pipefail
 source "$(dirname "${BASH_SOURCE[0]}")/../bench/device/install.sh" || exit 1
+source "$(dirname "${BASH_SOURCE[0]}")/../bench/device/pieces.sh" || exit 1 # join_pieces
 RUN_DIR=$TMP/paper
 STATE_DIR=${STATE_DIR:-.paper_state} # another run's state folder keeps runs apart (take_state.sh)
 # A state too large to travel beside the tree and the wheels comes in pieces over several calls
@@ -53,19 +54,11 @@ for dir in "$STATE_DIR"_part[0-9]*; do
   echo "staged state piece(s) $(cd "$dir" && ls -- *.part-* | tr '\n' ' ')from $dir"
 done
 if [[ ! -d $RUN_DIR && -f $TMP/state_parts/paper_state.sha256 ]]; then
-  want=$(cat "$TMP/state_parts/n_pieces" 2>/dev/null || echo 0)
-  have=$(compgen -G "$TMP/state_parts/paper_state.tar.gz.part-*" | wc -l)
-  if ((have == want)); then
-    cat "$TMP"/state_parts/paper_state.tar.gz.part-* >"$TMP/state_parts/paper_state.tar.gz"
-    if (cd "$TMP/state_parts" && sha256sum -c --quiet paper_state.sha256); then
-      STATE_DIR=$TMP/state_parts
-    else
-      echo "the joined state pieces do not match their sha256: not restored"
-      exit 1
-    fi
-  else
-    echo "state pieces staged so far: $have of $want"
-  fi
+  join_pieces "$TMP/state_parts" paper_state.tar.gz paper_state.sha256 state
+  case $? in
+  0) STATE_DIR=$TMP/state_parts ;;
+  2) echo "not restored" && exit 1 ;;
+  esac
 fi
 if [[ ! -d $RUN_DIR && -f $STATE_DIR/paper_state.tar.gz ]]; then
   tar -xzf "$STATE_DIR/paper_state.tar.gz" -C "$TMP" && echo "restored $RUN_DIR from $STATE_DIR"

@@ -14,7 +14,7 @@ REPO = Path(__file__).resolve().parents[1]
 def _repo_with_wheels(root: Path) -> dict[str, bytes]:
     """A git repository holding the two scripts and a .whl/ of two fake wheels (git-ignored)."""
     (root / "bench" / "device").mkdir(parents=True)
-    for name in ("cut_wheels.sh", "install.sh"):
+    for name in ("cut_wheels.sh", "install.sh", "pieces.sh"):
         shutil.copy(REPO / "bench" / "device" / name, root / "bench" / "device")
     (root / ".gitignore").write_text("/.whl*/\n")
     wheels = {
@@ -64,7 +64,8 @@ def test_wheels_cut_into_pieces_are_joined_on_the_device_once_all_have_come(tmp_
     stub.chmod(0o755)
     device, tmp = tmp_path / "device", tmp_path / "tmp"
     (device / "bench" / "device").mkdir(parents=True)
-    shutil.copy(here / "bench" / "device" / "install.sh", device / "bench" / "device")
+    for name in ("install.sh", "pieces.sh"):
+        shutil.copy(here / "bench" / "device" / name, device / "bench" / "device")
     staged = tmp / "whl"
     for i, piece in enumerate(pieces):
         shutil.copytree(piece, device / piece.name)

@@ -465,6 +465,7 @@ def test_state_cut_into_pieces_is_restored_on_the_device_once_every_piece_has_co
     (device / "experiments").mkdir(parents=True)
     (device / "bench" / "device").mkdir(parents=True)
     shutil.copy(paper.REPO / "experiments" / "device.sh", device / "experiments")
+    shutil.copy(paper.REPO / "bench" / "device" / "pieces.sh", device / "bench" / "device")
     (device / "bench" / "device" / "install.sh").write_text(
         'TMP=$DEVICE_TMP; OUT=$TMP/out; PY=python3; mkdir -p "$OUT"\n'
     )

@@ -15,9 +15,8 @@ set -euo pipefail
 cd "$(git rev-parse --show-toplevel)"
 [[ -f .whl/SHA256SUMS ]] || { echo "no .whl/: run bench/device/fetch_wheels.sh first" >&2; exit 1; }
 
-# Bytes that travel with every call: tracked files plus untracked files git does not ignore.
-tree_bytes=$( { git ls-files -z; git ls-files -z -o --exclude-standard; } \
-  | xargs -0 -r stat -c %s -- 2>/dev/null | awk '{s += $1} END {print s + 0}')
+source bench/device/pieces.sh
+tree_bytes=$(tree_bytes)
 limit=$((64 * 1048576))
 margin=$((2 * 1048576)) # room for what a call carries beside a piece (a translator, a state)
 room=$((limit - tree_bytes - margin))

@@ -49,9 +49,8 @@ zip -q -d .whl/mujoco-*.whl 'mujoco/experimental/*'
 (cd .whl && sha256sum -- *.whl >SHA256SUMS)
 download .whl-warp "$WARP_WHEEL"
 
-# Bytes that travel with every call: tracked files plus untracked files git does not ignore.
-tree_bytes=$( { git ls-files -z; git ls-files -z -o --exclude-standard; } \
-  | xargs -0 -r stat -c %s -- 2>/dev/null | awk '{s += $1} END {print s + 0}')
+source bench/device/pieces.sh
+tree_bytes=$(tree_bytes)
 tree_mib=$(( (tree_bytes + 1048575) / 1048576 ))
 piece_mib=${PIECE_MIB:-$(( 64 - tree_mib - 2 ))}
 (( piece_mib > 48 )) && piece_mib=48

@@ -19,6 +19,7 @@ WP=$TMP/wp
 OUT=${OUT:-$TMP/out}
 PY=${PY:-python3}
 mkdir -p "$SITE" "$WHL" "$WP" "$OUT"
+source "$(dirname "${BASH_SOURCE[0]}")/pieces.sh" || exit 1
 export PYTHONPATH="$SITE:$PWD"
 export MUJOCO_GL=disable # no rendering here; keeps mujoco from loading EGL/OpenGL
 export PYTHONUNBUFFERED=1
@@ -43,16 +44,11 @@ for dir in .whl-extra[0-9]*; do
   fi
 done
 if [[ -f $TMP/whl_parts/wheels.sha256 ]] && ! compgen -G "$WHL/*.whl" >/dev/null; then
-  want=$(cat "$TMP/whl_parts/n_pieces")
-  have=$(compgen -G "$TMP/whl_parts/wheels.tar.part-*" | wc -l)
-  if ((have == want)); then
-    cat "$TMP"/whl_parts/wheels.tar.part-* >"$TMP/whl_parts/wheels.tar"
-    (cd "$TMP/whl_parts" && sha256sum -c --quiet wheels.sha256) \
-      || { echo "the joined wheel pieces do not match their sha256"; exit 1; }
-    tar -xf "$TMP/whl_parts/wheels.tar" -C "$WHL" && rm -f "$TMP/whl_parts/wheels.tar"
-  else
-    echo "wheel pieces staged so far: $have of $want"
-  fi
+  join_pieces "$TMP/whl_parts" wheels.tar wheels.sha256 wheel
+  case $? in
+  0) tar -xf "$TMP/whl_parts/wheels.tar" -C "$WHL" && rm -f "$TMP/whl_parts/wheels.tar" ;;
+  2) exit 1 ;;
+  esac
 fi
 for dir in .whl-warp[0-9]*; do
   [[ -d $dir ]] || continue
@@ -72,7 +68,7 @@ if ! $PY -c "import mujoco.mjx" >/dev/null 2>&1; then
     $PY -m pip install -q --no-index --no-deps --no-compile --no-cache-dir --upgrade \
       --target "$SITE" "$WHL"/*.whl || exit 1
     echo "installed: $(cd "$WHL" && ls -- *.whl | tr '\n' ' ')"
-  else
+  elif [[ ! -f $TMP/whl_parts/wheels.sha256 ]]; then
     echo "mujoco is not installed and no .whl was carried (machine fresh?): carry .whl"
   fi
 fi
