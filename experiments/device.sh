@@ -22,7 +22,7 @@
 #   1. carry [".whl"]:   bash experiments/device.sh
 #      The tree is now too large to travel beside the whole .whl (64 MiB a call):
 #      `bash bench/device/cut_wheels.sh` here cuts it into .whl-extra1..N/ (N = 3 beside a 54 MiB
-#      tree); carry them one per call, each with `RUN=0 bash experiments/device.sh` but the last,
+#      tree, 4 at 55 MiB: it prints N); carry them one per call, each with `RUN=0 bash experiments/device.sh` but the last,
 #      which runs the chain (results/paper/rerun_2026-11-27/README.md: the same with two halves).
 #   2.. carry nothing, each within the machine's 30 s warm window: bash experiments/device.sh
 #      (the run folder is still in /tmp/paper), until the command says every stage is done.
