@@ -1,4 +1,4 @@
-"""studies/distill_schedule_gpu.sh, rehearsed off the GPU: a stand-in Python records each command
+"""tools/device/distill_schedule.sh, rehearsed off the GPU: a stand-in Python records each command
 and writes what ccgan.distill would, so the script's run names, teacher caches, resumes and
 returned files are checked without a device."""
 
@@ -23,10 +23,11 @@ touch "$out/teacher.npz" "$out/translator.ckpt"
 def _device(tmp_path):
     """The tree as the device sees it: the script, a stand-in install.sh, a carried cache."""
     device = tmp_path / "device"
-    (device / "studies").mkdir(parents=True)
-    (device / "bench" / "device").mkdir(parents=True)
-    shutil.copy(paper.REPO / "studies" / "distill_schedule_gpu.sh", device / "studies")
-    (device / "bench" / "device" / "install.sh").write_text(
+    (device / "tools" / "device").mkdir(parents=True)
+    shutil.copy(
+        paper.REPO / "tools" / "device" / "distill_schedule.sh", device / "tools" / "device"
+    )
+    (device / "tools" / "device" / "install.sh").write_text(
         'TMP=$DEVICE_TMP; OUT=$TMP/out; mkdir -p "$OUT"\n'
     )
     (device / ".teacher_cache" / "c").mkdir(parents=True)
@@ -44,7 +45,7 @@ def _device(tmp_path):
 
 def _call(device, env, *runs):
     return subprocess.run(
-        ["bash", "studies/distill_schedule_gpu.sh", *runs],
+        ["bash", "tools/device/distill_schedule.sh", *runs],
         cwd=device,
         env=env,
         capture_output=True,

@@ -1,8 +1,8 @@
 #!/usr/bin/env bash
-# Runs ON THE GPU MACHINE (the device tool's `run`), mujoco installed (bench/device/install.sh):
+# Runs ON THE GPU MACHINE (the device tool's `run`), mujoco installed (tools/device/install.sh):
 # does one GPU plan two MJX teachers at once as fast as one? The teacher (tracking.mpc_mjx) is
 # latency-bound, so two processes might overlap where trainings do not (bench/results/h200/sharing.md).
-#   bash bench/device/teacher_sharing.sh [bench.teacher flags]
+#   bash tools/device/teacher_sharing.sh [bench.teacher flags]
 # runs `python -m bench.teacher FLAGS` alone, then two copies at once, and puts each run's
 # .md/.json into $OUT/teacher_sharing/ with the wall times (wall.txt).
 # Every run: no persistent compilation cache (each compiles, as alone; SOFTARM_JAX_CACHE=0) and

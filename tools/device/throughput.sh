@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # Runs ON THE GPU MACHINE (the device tool's `run`), from the repository root of the copy sent there.
 #
-#   bash bench/device/on_device.sh [bench/throughput.py arguments...]
+#   bash tools/device/throughput.sh [bench/throughput.py arguments...]
 #
 # Every call: (1) stages what the call carried: .whl/ -> /tmp/whl/, .whl-warpN/ -> /tmp/wp/;
 # (2) installs the mujoco wheels once (sha256 checked) with
@@ -14,19 +14,19 @@
 # ends), so results of successive calls accumulate in /tmp/bench_out (one table) and the warp
 # pieces add up in /tmp/wp. A fresh machine starts bare: then start again from call 1.
 #
-# Prepare HERE first: `bash bench/device/fetch_wheels.sh` (writes the git-ignored .whl/,
+# Prepare HERE first: `bash tools/device/fetch_wheels.sh` (writes the git-ignored .whl/,
 # .whl-warp1/ ... .whl-warp4/; it prints the piece count). A call sends the working tree (~25 MiB)
 # plus its carried paths, 64 MiB in all, hence one folder per call. Exact sequence of `run` calls
 # (kind nvidia-h100-x1, or nvidia-h200; calls 2-5 must each start within the 30 s warm window):
 #
 #   1. carry [".whl"], timeout_s 600:
-#        bash bench/device/on_device.sh --impl jax --segments 10 20 30 --batches 8192 32768 --seconds 2
+#        bash tools/device/throughput.sh --impl jax --segments 10 20 30 --batches 8192 32768 --seconds 2
 #      (installs mujoco; MuJoCo C and MJX-JAX for every segment count; results come back)
-#   2. carry [".whl-warp1"], timeout_s 120:   bash bench/device/on_device.sh
-#   3. carry [".whl-warp2"], timeout_s 120:   bash bench/device/on_device.sh
-#   4. carry [".whl-warp3"], timeout_s 120:   bash bench/device/on_device.sh
+#   2. carry [".whl-warp1"], timeout_s 120:   bash tools/device/throughput.sh
+#   3. carry [".whl-warp2"], timeout_s 120:   bash tools/device/throughput.sh
+#   4. carry [".whl-warp3"], timeout_s 120:   bash tools/device/throughput.sh
 #   5. carry [".whl-warp4"], timeout_s 600:
-#        bash bench/device/on_device.sh --impl warp --segments 10 20 30 --batches 8192 32768 --seconds 2
+#        bash tools/device/throughput.sh --impl warp --segments 10 20 30 --batches 8192 32768 --seconds 2
 #      (joins and installs warp-lang; MJX-Warp, checked against the MJX-JAX poses of call 1;
 #      the returned throughput_segments.{md,json} hold both implementations)
 #

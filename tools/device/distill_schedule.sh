@@ -8,13 +8,13 @@
 # is picked on the 16 held-out 60 s programs; table_aged:RUN scores the shapes of a chosen run.
 #
 # Call sequence (nvidia-h100-x1, timeout_s 600), back to back while the machine is warm:
-#   1. carry [".whl-extra1", ".teacher_cache/c"]: bash studies/distill_schedule_gpu.sh
+#   1. carry [".whl-extra1", ".teacher_cache/c"]: bash tools/device/distill_schedule.sh
 #      (stages half the wheels and a teacher cache; the tree leaves ~17 MiB a call)
-#   2. carry [".whl-extra2", ".teacher_cache/aged"]: bash studies/distill_schedule_gpu.sh RUN...
-#   3. bash studies/distill_schedule_gpu.sh RUN...  (each RUN goes on where the last call
+#   2. carry [".whl-extra2", ".teacher_cache/aged"]: bash tools/device/distill_schedule.sh RUN...
+#   3. bash tools/device/distill_schedule.sh RUN...  (each RUN goes on where the last call
 #      stopped it: ccgan.distill keeps its training state at --max-wall-s)
 # .teacher_cache/{c,aged}/teacher.npz: the chain's teacher_c and teacher_aged caches (240 + 16
-# programs of 60 s; runs/paper/teacher_*/teacher.npz after experiments/take_state.sh).
+# programs of 60 s; runs/paper/teacher_*/teacher.npz after tools/device/take_state.sh).
 # RUN names: {c,aged}[_k<k>]_b<batch>_e<epochs> (k: 15 for c, 20 for aged unless given). A run
 # at another k than the carried cache's plans its own teacher first (ccgan.distill, resumable
 # across calls like the training). BUDGET_S (default 560) is what the call may use.
@@ -24,7 +24,7 @@
 # Returns $OUT/distill_schedule.tar.gz (each run's folder without its teacher cache) and each
 # finished run's own planned teacher as $OUT/teacher_<RUN>.npz.
 set -uo pipefail
-source "$(dirname "${BASH_SOURCE[0]}")/../bench/device/install.sh" || exit 1
+source "$(dirname "${BASH_SOURCE[0]}")/install.sh" || exit 1
 echo "$(nproc) cores; $(nvidia-smi -L 2>/dev/null | head -1)"
 WORK=$TMP/distill_schedule
 mkdir -p "$WORK"

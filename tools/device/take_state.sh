@@ -1,20 +1,22 @@
 #!/usr/bin/env bash
-# Runs HERE, after a call of experiments/device.sh: joins the returned pieces of the run folder
+# Runs HERE, after a call of tools/device/chain.sh: joins the returned pieces of the run folder
 # (paper_state.tar.gz.part-NN), checks them against paper_state.sha256 and keeps the whole file
 # as .paper_state/paper_state.tar.gz, which the next call restores from on a fresh machine.
-# STATE_DIR=.paper_state_NAME keeps a second run's state apart from the first (experiments/device.sh
+# STATE_DIR=.paper_state_NAME keeps a second run's state apart from the first (tools/device/chain.sh
 # reads the same variable).
 #
-#   bash experiments/take_state.sh FILES_AT          # FILES_AT: the folder the call's files lie in
-#   bash experiments/take_state.sh FILES_AT runs/    # and unpack the run folder into runs/paper
+#   bash tools/device/take_state.sh FILES_AT          # FILES_AT: the folder the call's files lie in
+#   bash tools/device/take_state.sh FILES_AT runs/    # and unpack the run folder into runs/paper
 # It never unpacks over a run folder: with UNPACK_DIR/paper already there it refuses before
 # doing anything (move that folder away, or name another UNPACK_DIR).
-#   bash experiments/take_state.sh --pieces N       # cut the kept state into N carryable folders
+#   bash tools/device/take_state.sh --pieces N       # cut the kept state into N carryable folders
 # --pieces N: .paper_state_part1/ ... .paper_state_partN/, each with a piece of the kept file,
 # paper_state.sha256 and n_pieces, for a state that does not travel beside the tree in one call
-# (experiments/device.sh stages the pieces call by call and restores once all are there).
+# (tools/device/chain.sh stages the pieces call by call and restores once all are there).
 set -euo pipefail
-root=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
+here=$(dirname "${BASH_SOURCE[0]}")
+root=$(cd "$here/../.." && pwd)
+source "$here/pieces.sh" # check_sum
 if [[ ${1:-} == --pieces ]]; then
   n=${2:?usage: take_state.sh --pieces N}
   [[ $n =~ ^[1-9][0-9]?$ ]] || { echo "--pieces takes a number from 1 to 99, got $n" >&2; exit 2; }
@@ -50,8 +52,9 @@ compgen -G "$from/paper_state.tar.gz.part-*" >/dev/null || {
 tmp=$(mktemp -d)
 trap 'rm -rf "$tmp"' EXIT
 cat "$from"/paper_state.tar.gz.part-* >"$tmp/paper_state.tar.gz"
-(cd "$tmp" && sha256sum -c --quiet "$from/paper_state.sha256") || {
-  echo "the joined state does not match $from/paper_state.sha256: .paper_state is unchanged" >&2
+# The sha256 file may name only the joined file (paper_state.tar.gz, no folder): see check_sum.
+check_sum "$tmp/paper_state.tar.gz" "$from/paper_state.sha256" || {
+  echo "the joined state does not match $from/paper_state.sha256: the kept state is unchanged" >&2
   exit 1
 }
 state_dir=$root/${STATE_DIR:-.paper_state}

@@ -1,21 +1,21 @@
 #!/usr/bin/env bash
-# Cuts .whl/ (bench/device/fetch_wheels.sh) HERE into loads that each travel beside the working
+# Cuts .whl/ (tools/device/fetch_wheels.sh) HERE into loads that each travel beside the working
 # tree in one device `run` call (64 MiB a call, tree included), for a tree too large to travel
 # beside the whole .whl (about 22 MiB).
 #
-#   bash bench/device/cut_wheels.sh       # as many pieces as the tree's size needs
-#   PIECES=4 bash bench/device/cut_wheels.sh
+#   bash tools/device/cut_wheels.sh       # as many pieces as the tree's size needs
+#   PIECES=4 bash tools/device/cut_wheels.sh
 #
 # Writes .whl-extra1/ ... .whl-extraN/ (git-ignored), each holding one byte piece of a tar of
 # .whl (wheels.tar.part-aa, -ab, ...), the tar's sha256 (wheels.sha256) and the piece count
-# (n_pieces). bench/device/install.sh stages each carried piece in $TMP and, once all N have
+# (n_pieces). tools/device/install.sh stages each carried piece in $TMP and, once all N have
 # come over consecutive calls on one warm machine and the joined tar matches its sha256, unpacks
 # and installs the wheels.
 set -euo pipefail
 cd "$(git rev-parse --show-toplevel)"
-[[ -f .whl/SHA256SUMS ]] || { echo "no .whl/: run bench/device/fetch_wheels.sh first" >&2; exit 1; }
+[[ -f .whl/SHA256SUMS ]] || { echo "no .whl/: run tools/device/fetch_wheels.sh first" >&2; exit 1; }
 
-source bench/device/pieces.sh
+source tools/device/pieces.sh
 tree_bytes=$(tree_bytes)
 limit=$((64 * 1048576))
 margin=$((2 * 1048576)) # room for what a call carries beside a piece (a translator, a state)

@@ -2,10 +2,10 @@
 # Runs ON THE GPU MACHINE (the device tool's `run`), from the repository root of the copy sent
 # there: the chain of experiments/paper.json, resumed from where the last call stopped.
 #
-#   bash experiments/device.sh            # install what was carried, run until the deadline
-#   RUN=0 bash experiments/device.sh      # install only
+#   bash tools/device/chain.sh            # install what was carried, run until the deadline
+#   RUN=0 bash tools/device/chain.sh      # install only
 #
-# Each call: installs the carried wheels (bench/device/install.sh); restores the run folder from
+# Each call: installs the carried wheels (tools/device/install.sh); restores the run folder from
 # a carried .paper_state/paper_state.tar.gz when the machine does not hold it already; runs
 # `python -m experiments.paper --out $TMP/paper --jobs ${JOBS:-6} --deadline-s ${DEADLINE_S:-500}`
 # (up to JOBS stages at once, of which one training per GPU: the config's "gpu" stages take
@@ -19,29 +19,29 @@
 #
 # Sequence of `run` calls (nvidia-h100-x1 or nvidia-h200, or a kind of several GPUs, where each
 # stage gets a GPU of its own; timeout_s 600):
-#   1. carry [".whl"]:   bash experiments/device.sh
+#   1. carry [".whl"]:   bash tools/device/chain.sh
 #      The tree is now too large to travel beside the whole .whl (64 MiB a call):
-#      `bash bench/device/cut_wheels.sh` here cuts it into .whl-extra1..N/ (N = 3 beside a 54 MiB
-#      tree, 4 at 55 MiB: it prints N); carry them one per call, each with `RUN=0 bash experiments/device.sh` but the last,
+#      `bash tools/device/cut_wheels.sh` here cuts it into .whl-extra1..N/ (N = 3 beside a 54 MiB
+#      tree, 4 at 55 MiB: it prints N); carry them one per call, each with `RUN=0 bash tools/device/chain.sh` but the last,
 #      which runs the chain (results/paper/rerun_2026-11-27/README.md: the same with two halves).
-#   2.. carry nothing, each within the machine's 30 s warm window: bash experiments/device.sh
+#   2.. carry nothing, each within the machine's 30 s warm window: bash tools/device/chain.sh
 #      (the run folder is still in /tmp/paper), until the command says every stage is done.
 #      A machine is held at most 30 minutes: three calls of ~520 s fit, a fourth does not; start
 #      the next machine as below.
-#   If the machine was lost: carry [".whl"] with `RUN=0 bash experiments/device.sh`, then at once
+#   If the machine was lost: carry [".whl"] with `RUN=0 bash tools/device/chain.sh`, then at once
 #   carry [".paper_state"] (the last returned state; the .whl and the state do not fit one call
-#   beside the tree) with `bash experiments/device.sh`. When the state and the tree exceed the
-#   64 MiB a call carries: `bash experiments/take_state.sh --pieces 3` here cuts the kept state
+#   beside the tree) with `bash tools/device/chain.sh`. When the state and the tree exceed the
+#   64 MiB a call carries: `bash tools/device/take_state.sh --pieces 3` here cuts the kept state
 #   into .paper_state_part1..3/, and the calls carry [".whl-extra1", ".paper_state_part1"],
 #   [".whl-extra2", ".paper_state_part2"] (both with RUN=0), then [".paper_state_part3"] with
-#   `bash experiments/device.sh` (the .whl halves: bench/device/install.sh). A second run beside a kept one uses its
+#   `bash tools/device/chain.sh` (the .whl halves: tools/device/install.sh). A second run beside a kept one uses its
 #   own folder: STATE_DIR=.paper_state_NAME here and there (carry [".paper_state_NAME"]).
-# Here, after each call: bash experiments/take_state.sh FILES_AT (joins and checks the pieces into
-# the git-ignored .paper_state/). Finished: bash experiments/take_state.sh FILES_AT runs/ unpacks
+# Here, after each call: bash tools/device/take_state.sh FILES_AT (joins and checks the pieces into
+# the git-ignored .paper_state/). Finished: bash tools/device/take_state.sh FILES_AT runs/ unpacks
 # the run folder too; commit what docs/chain.md names.
 set -uo pipefail
-source "$(dirname "${BASH_SOURCE[0]}")/../bench/device/install.sh" || exit 1
-source "$(dirname "${BASH_SOURCE[0]}")/../bench/device/pieces.sh" || exit 1 # join_pieces
+source "$(dirname "${BASH_SOURCE[0]}")/install.sh" || exit 1
+source "$(dirname "${BASH_SOURCE[0]}")/pieces.sh" || exit 1 # join_pieces
 RUN_DIR=$TMP/paper
 STATE_DIR=${STATE_DIR:-.paper_state} # another run's state folder keeps runs apart (take_state.sh)
 # A state too large to travel beside the tree and the wheels comes in pieces over several calls
@@ -88,7 +88,7 @@ rc=${PIPESTATUS[0]}
 kill $sampler 2>/dev/null
 $PY -m experiments.paper --out "$RUN_DIR" --config "$CONFIG" --list
 # The device returns files of at most 16 MiB (8 files, 64 MiB in all): the state travels in
-# pieces of 15 MiB with the whole file's sha256; experiments/take_state.sh joins them here.
+# pieces of 15 MiB with the whole file's sha256; tools/device/take_state.sh joins them here.
 tar -czf "$TMP/paper_state.tar.gz" -C "$TMP" paper
 (cd "$TMP" && sha256sum paper_state.tar.gz) >"$OUT/paper_state.sha256"
 split -b 15M -d "$TMP/paper_state.tar.gz" "$OUT/paper_state.tar.gz.part-"

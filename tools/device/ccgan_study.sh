@@ -8,17 +8,17 @@
 #   3. trials of `ccgan.tune` until STUDY_SECONDS (default 300) have passed, in batches of
 #      TRIALS_PER_BATCH (default 16), each trial scored in the D_c simulator.
 # Call sequence (nvidia-h100-x1, timeout_s 600), back to back while the machine is warm:
-#   1. carry [".whl"] (bench/device/fetch_wheels.sh): bash studies/ccgan_study.sh install
+#   1. carry [".whl"] (tools/device/fetch_wheels.sh): bash tools/device/ccgan_study.sh install
 #      (or, when the tree and .whl pass 64 MiB: carry [".whl-extra1"] holding the mujoco and glfw
 #      wheels, then [".whl-extra2", ".whl-optuna"] holding mujoco-mjx, pyopengl and trimesh, each
 #      folder with a copy of .whl/SHA256SUMS; install.sh installs once all are staged)
 #   2. carry [".whl-optuna"] (pip download optuna and matplotlib for Python 3.12 into it; optuna is
 #      not on the GPU image), with the previous calls' ccgan_study/ folder in the tree:
-#      STUDY_SECONDS=300 bash studies/ccgan_study.sh
-#   or, after the study: bash studies/ccgan_study.sh budget --batch 0 --max-trials 8 --epochs 160
+#      STUDY_SECONDS=300 bash tools/device/ccgan_study.sh
+#   or, after the study: bash tools/device/ccgan_study.sh budget --batch 0 --max-trials 8 --epochs 160
 #      --stretch-every 40 (studies.ccgan_budget: the study's budget against a longer training)
 set -uo pipefail
-source "$(dirname "${BASH_SOURCE[0]}")/../bench/device/install.sh" || exit 1
+source "$(dirname "${BASH_SOURCE[0]}")/install.sh" || exit 1
 $PY - <<'PYEOF'
 from importlib import metadata
 for d in ("optuna", "sqlalchemy", "alembic", "matplotlib", "tqdm", "flax", "optax"):
@@ -59,7 +59,7 @@ fi
 # `timeout` (its trials stay RUNNING in the storage and are not counted), so the files come back.
 hard=$((${CALL_SECONDS:-560} - (SECONDS - start) - 15))
 # STUDY_NAME and FORWARD_WORKDIR start another study in the same storage with another F_c
-# (studies/issue29_gpu.sh's; its report goes to report_<name>/).
+# (e.g. an F_c of studies.forward_data; its report goes to report_<name>/).
 NAME=${STUDY_NAME:-ccgan_paper_scale}
 REPORT=$RUN/report
 [[ $NAME != ccgan_paper_scale ]] && REPORT=$RUN/report_$NAME

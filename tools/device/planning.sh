@@ -9,8 +9,8 @@
 # Each runs under its own time limit, so one slow row set cannot take the call's 600 s.
 #
 # Sequence of `run` calls (nvidia-h100-x1, timeout_s 600) on a fresh machine:
-#   1. carry [".whl-extra1"]: bash bench/device/planning_gpu.sh   (stages half the wheels)
-#   2. at once, carry [".whl-extra2"]: bash bench/device/planning_gpu.sh
+#   1. carry [".whl-extra1"]: bash tools/device/planning.sh   (stages half the wheels)
+#   2. at once, carry [".whl-extra2"]: bash tools/device/planning.sh
 # Copy what comes back into bench/results/<gpu>/planning/.
 set -uo pipefail
 source "$(dirname "${BASH_SOURCE[0]}")/install.sh" || exit 1

@@ -3,8 +3,8 @@
 # that has Python 3.12 + jax 0.11 (CUDA) but no mujoco and no network, and cuts them into loads
 # that each fit one device `run` call.
 #
-#   bash bench/device/fetch_wheels.sh            # piece size from the working tree's size
-#   PIECE_MIB=30 bash bench/device/fetch_wheels.sh
+#   bash tools/device/fetch_wheels.sh            # piece size from the working tree's size
+#   PIECE_MIB=30 bash tools/device/fetch_wheels.sh
 #
 # Writes (all git-ignored, see .gitignore):
 #   .whl/            mujoco 3.17.0 (without MuJoCo Studio, see below), mujoco-mjx 3.17.0 and the
@@ -17,7 +17,7 @@
 # Why pieces: a `run` call sends the working tree (tracked and untracked-not-ignored files, about
 # 25 MiB in 2026-11) plus its carried paths, 64 MiB in all. What is left for a carried folder sets
 # the piece size (64 MiB - tree - 2 MiB margin, at most 48 MiB); with a 25 MiB tree the warp wheel
-# takes 4 pieces. bench/device/on_device.sh puts them back together on the device.
+# takes 4 pieces. tools/device/throughput.sh puts them back together on the device.
 #
 # Versions: the project pins mujoco==3.17.0 and mujoco-mjx==3.17.0 (pyproject.toml); mujoco-mjx
 # 3.17's `warp` extra pins warp-lang==1.18.0. The GPU image already has absl-py, etils, scipy,
@@ -49,7 +49,7 @@ zip -q -d .whl/mujoco-*.whl 'mujoco/experimental/*'
 (cd .whl && sha256sum -- *.whl >SHA256SUMS)
 download .whl-warp "$WARP_WHEEL"
 
-source bench/device/pieces.sh
+source tools/device/pieces.sh
 tree_bytes=$(tree_bytes)
 tree_mib=$(( (tree_bytes + 1048575) / 1048576 ))
 piece_mib=${PIECE_MIB:-$(( 64 - tree_mib - 2 ))}

@@ -1,8 +1,8 @@
-# Sourced ON THE GPU MACHINE by bench/device/on_device.sh and experiments/device.sh, from the
+# Sourced ON THE GPU MACHINE by tools/device/throughput.sh and tools/device/chain.sh, from the
 # repository root of the copy sent there: installs what the call carried, no network needed.
 #
 # (1) stages the carried wheel folders: .whl/ or, for a tree too large to travel beside the whole
-#     .whl, its pieces .whl-extra1/ ... .whl-extraN/ (bench/device/cut_wheels.sh; or whole wheels
+#     .whl, its pieces .whl-extra1/ ... .whl-extraN/ (tools/device/cut_wheels.sh; or whole wheels
 #     in two halves, as before), carried in consecutive calls while the machine stays warm
 #     -> $TMP/whl/, .whl-warpN/ -> $TMP/wp/;
 # (2) installs the mujoco wheels once (sha256 checked) with
@@ -11,7 +11,7 @@
 #     installs it the same way; (4) the wheels of .whl-optuna; then prints the versions it sees.
 # Sets SITE, OUT, PY, PYTHONPATH, MUJOCO_GL=disable and PYTHONUNBUFFERED for the caller.
 # $TMP stays as a call left it while the machine is warm (30 s after a call ends); a fresh
-# machine starts bare. Wheels come from bench/device/fetch_wheels.sh, run here first.
+# machine starts bare. Wheels come from tools/device/fetch_wheels.sh, run here first.
 TMP=${DEVICE_TMP:-/tmp} # overridable only to rehearse the calls on another machine
 SITE=$TMP/site
 WHL=$TMP/whl
@@ -31,7 +31,7 @@ if compgen -G ".whl/*.whl" >/dev/null; then
 fi
 # .whl cut for a tree too large to travel beside the whole .whl, staged call by call: either
 # whole wheels (.whl-extra1, .whl-extra2, each with a copy of SHA256SUMS), or byte pieces of a tar
-# of .whl (bench/device/cut_wheels.sh: wheels.tar.part-*, wheels.sha256, n_pieces), unpacked into
+# of .whl (tools/device/cut_wheels.sh: wheels.tar.part-*, wheels.sha256, n_pieces), unpacked into
 # $WHL once all pieces are here and the joined tar matches its sha256.
 for dir in .whl-extra[0-9]*; do
   [[ -d $dir ]] || continue
