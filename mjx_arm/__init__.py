@@ -96,6 +96,10 @@ def __getattr__(name):
         from mjx_arm import model_gen
 
         return getattr(model_gen, name)
+    if name in ("RodArm", "load_rod"):  # the reference rod as an arm (imports model_gen too)
+        from mjx_arm import rod_arm
+
+        return getattr(rod_arm, name)
     raise AttributeError(f"module 'mjx_arm' has no attribute {name!r}")
 
 
@@ -110,6 +114,7 @@ __all__ = [
     "ModelValidationError",
     "P_MAX_BAR",
     "P_MIN_BAR",
+    "RodArm",
     "SOURCE",
     "SimState",
     "SimulationDivergedError",
@@ -117,5 +122,6 @@ __all__ = [
     "check_pressures",
     "generate_xml",
     "load",
+    "load_rod",
     "validate_model",
 ]

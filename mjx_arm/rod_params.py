@@ -222,7 +222,8 @@ class RodState(NamedTuple):
 
 
 class RodConstants(NamedTuple):
-    """Constants of one discretisation, as float64 numpy arrays (closed over by jitted code)."""
+    """Constants of one discretisation, as float64 numpy arrays (closed over by jitted code;
+    `astype` casts them)."""
 
     rest_length: float  # l0 (m)
     dt: float  # (s)
@@ -241,6 +242,14 @@ class RodConstants(NamedTuple):
     trans_damp: float  # per-step factor on v (dynamics)
     settle_damp: float  # per-step factor on v and omega (static solves)
     stretch_factors: bool  # the "gazzola" law's 1 / e and 1 / e_v^3 (a static branch)
+
+    def astype(self, dtype) -> RodConstants:
+        """These constants with every array in `dtype` (e.g. float32 for a float32 rollout: a
+        float64 constant would promote the state under x64). Scalars stay Python floats, which
+        take the state's dtype."""
+        return RodConstants(
+            *(np.asarray(v, dtype) if isinstance(v, np.ndarray) else v for v in self)
+        )
 
 
 #: Rest directors: d1 = +x, d2 = -y, d3 = -z.

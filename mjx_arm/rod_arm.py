@@ -1,0 +1,252 @@
+"""The reference Cosserat rod as an arm: `Arm.rollout`'s interface, in the chain's domains.
+
+`load_rod(domain)` returns a `RodArm` whose `rollout(pressures_bar)` takes the programs
+`mjx_arm.Arm.rollout` takes ([T, 3] or [B, T, 3] chamber commands in bar at 10 Hz, each held for
+0.1 s) and returns the same poses ([T, 6] or [B, T, 6]: tip position in m, then the unit d3 of
+the last element), from the same rest (settled under gravity with the chambers at the valve
+floor) through the same valves (`mjx_arm.valve`: saturation to [0.2, 3.5] bar, 0.2 s rise and
+0.56 s drop time constants). So any pressure program can be scored in the paper's own kind of
+simulator, a rod under Gazzola's law, as well as on the fitted chain.
+
+The rollout is `mjx_arm.cosserat`'s (`mjx_arm.rod_dynamics.rollout_single`: position Verlet at the
+paper code's 2e-4 s, its analytical damper), jitted and vmapped over the batch, compiled once per
+domain, dtype and program shape. In float64 (the default) it is the committed reference path
+that `mjx_arm.fidelity` and `mjx_arm.fit` call, to rounding; `python -m mjx_arm.rod_arm` checks
+that on the fidelity report's programs. float32 (`dtype="float32"`) is offered for speed;
+`bench.rod_throughput` measures what it costs in accuracy and gains in speed
+(bench/results/cpu/rod_throughput.md).
+
+Domains map onto the rod as follows (`rod_params`):
+  * medium: `Domain.viscosity_scale` multiplies the rod's damping constant c of the source
+    medium (800 1/s, the paper code's D_s); None, the chain's fitted constrained medium, is the
+    paper code's D_c (c = 8000 1/s), which that fit was made against. A `Domain.viscosity` in Pa s
+    has no meaning for the rod's damper and is refused.
+  * `stiffness_scale` multiplies E and G (the aged arm: x0.7 in D_c); `mass_scale` the mass,
+    and with it every element's inertia.
+  * `inertia_scale` is the chain's numerical mass scaling for its explicit drag; the rod's
+    damper is unconditionally stable and needs none, so it is ignored.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import functools
+import sys
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from mjx_arm import checks, cosserat, domains, valve
+from mjx_arm.arm import SimulationDivergedError
+from mjx_arm.model_gen import ArmParams
+from mjx_arm.rod_dynamics import rollout_single
+from mjx_arm.rod_params import DOMAIN_DAMPING_PER_S, CosseratParams, RodState, make_rod
+
+#: The rollout's floating-point types; float64 is the default (see `RodArm`).
+DTYPES = ("float64", "float32")
+#: Largest tip difference (fraction of L) allowed between `RodArm` in float64 and the committed
+#: reference path (`cosserat.rollout`) by `python -m mjx_arm.rod_arm` and the tests.
+AGREEMENT_FRACTION_OF_L = 1e-6
+
+
+def rod_params(
+    domain: str | domains.Domain = "source",
+    arm: ArmParams = ArmParams(),
+    n_elements: int = 20,
+) -> CosseratParams:
+    """The rod of `arm`'s geometry, section, mass and material in `domain` (see the module
+    docstring for the mapping). For "source" and "constrained" these are exactly the
+    parameters the fidelity report runs (`CosseratParams.from_arm(arm, domain)`).
+
+    Raises:
+      ValueError: an unknown domain name, or a `Domain` with `viscosity` set.
+    """
+    d = domains.resolve(domain)
+    if d.viscosity is not None:
+        raise ValueError(
+            f"Domain {d.name!r} sets viscosity={d.viscosity} Pa s, which the rod's damper has no"
+            " use for: give viscosity_scale (a factor on the source medium's damping constant"
+            f" {DOMAIN_DAMPING_PER_S['source']:g} 1/s) instead"
+        )
+    base = CosseratParams.from_arm(arm, "source", n_elements=n_elements)
+    damping = (
+        DOMAIN_DAMPING_PER_S["constrained"]
+        if d.viscosity_scale is None
+        else base.damping_per_s * d.viscosity_scale
+    )
+    return dataclasses.replace(
+        base,
+        damping_per_s=damping,
+        youngs_modulus_pa=base.youngs_modulus_pa * d.stiffness_scale,
+        shear_modulus_pa=base.shear_modulus_pa * d.stiffness_scale,
+        mass_kg=base.mass_kg * d.mass_scale,
+    )
+
+
+@functools.lru_cache(maxsize=16)
+def _batched_rollout(params: CosseratParams, dtype: str, valve_params: valve.ValveParams):
+    """jit(vmap(rollout_single)) of one rod in `dtype`: commands [B, T, 3] -> poses [B, T, 6]."""
+    rod = make_rod(params).astype(dtype)
+    rest = RodState(*(np.asarray(a, dtype) for a in cosserat.rest_state(params)))
+    single = functools.partial(rollout_single, rod, params.n_substeps, valve_params, rest)
+    return jax.jit(jax.vmap(single))
+
+
+@dataclasses.dataclass(frozen=True)
+class RodArm:
+    """The reference rod in one domain, with `Arm.rollout`'s interface.
+
+    Attributes:
+      params: the rod (`rod_params` of the domain).
+      domain: the domain it was made for.
+      dtype: "float64" (default: the reference, to rounding) or "float32" (faster, less exact).
+      valve: the valve constants, the chain's defaults (`mjx_arm.valve.ValveParams`).
+    """
+
+    params: CosseratParams
+    domain: domains.Domain
+    dtype: str = "float64"
+    valve: valve.ValveParams = valve.ValveParams()
+
+    def __post_init__(self):
+        if self.dtype not in DTYPES:
+            raise ValueError(f"dtype must be one of {DTYPES}, got {self.dtype!r}")
+        self.params.validate()
+        valve.check(self.valve)
+
+    @property
+    def n_substeps(self) -> int:
+        """Physics steps per 0.1 s control period (500 at the paper code's 2e-4 s)."""
+        return self.params.n_substeps
+
+    @property
+    def timestep_s(self) -> float:
+        return self.params.timestep_s
+
+    @property
+    def length_m(self) -> float:
+        return self.params.length_m
+
+    def rest_pose(self) -> np.ndarray:
+        """The pose [6] every rollout starts from (float64)."""
+        state = cosserat.rest_state(self.params)
+        return np.concatenate([state.x[-1], state.q[-1, 2]])
+
+    def rollout_fn(self):
+        """The jitted, vmapped rollout `fn(commands [B, T, 3]) -> poses [B, T, 6]` in `dtype`.
+
+        Commands must already be in `dtype` (float64 ones need `jax.enable_x64(True)` around the
+        call); no checks are made. `rollout` is the checked entry point.
+        """
+        return _batched_rollout(self.params, self.dtype, self.valve)
+
+    def rollout(self, pressures_bar) -> np.ndarray:
+        """Simulates pressure programs from rest and returns the tip pose after each command.
+
+        As `mjx_arm.Arm.rollout`: commands outside [0, 3.5] bar saturate like a real valve and
+        commands under the valve floor (0.2 bar) act as the floor; each is held for 0.1 s while
+        the chamber pressures lag toward it. The pose is the rod's at the end of each period.
+
+        Args:
+          pressures_bar: [T, 3] or [B, T, 3] chamber commands (bar) at 10 Hz.
+
+        Returns:
+          [T, 6] or [B, T, 6] float64 poses: tip position (m) then unit d3.
+
+        Raises:
+          ValueError: bad shape (an empty batch included), boolean or non-finite pressures.
+          SimulationDivergedError: a trajectory's pose became non-finite.
+        """
+        if np.asarray(pressures_bar).dtype == np.bool_:
+            raise ValueError("pressures_bar is boolean; give pressures in bar (numbers)")
+        batched = checks.check_pressures(pressures_bar)
+        with jax.enable_x64(self.dtype == "float64"):
+            poses = np.asarray(self.rollout_fn()(jnp.asarray(batched, self.dtype)), np.float64)
+        ok = np.isfinite(poses).all(axis=-1)  # [B, T]
+        if not ok.all():
+            bad = np.flatnonzero(~ok.all(axis=1))
+            first = np.argmin(ok[bad], axis=1)
+            raise SimulationDivergedError(
+                f"the rod diverged in {len(bad)} of {len(ok)} trajectories (first: trajectory"
+                f" {bad[0]} at period {first[0]}); in float32, try dtype='float64'",
+                bad,
+                first,
+            )
+        return poses if np.ndim(pressures_bar) == 3 else poses[0]
+
+
+def load_rod(
+    domain: str | domains.Domain = "source",
+    *,
+    dtype: str = "float64",
+    arm: ArmParams = ArmParams(),
+    n_elements: int = 20,
+) -> RodArm:
+    """The reference rod as an arm in `domain` ("source", "constrained", "aged" or a `Domain`).
+
+    Args:
+      domain: the world, mapped onto the rod as the module docstring says.
+      dtype: "float64" (default) or "float32".
+      arm: the geometry, section, mass and material (its physical values, not its fit).
+      n_elements: Cosserat elements (the paper's 20).
+
+    Raises:
+      ValueError: an unknown domain or dtype, a `Domain` with `viscosity` set, or a rod that is
+        unstable at its timestep (`CosseratParams.validate`).
+    """
+    return RodArm(
+        params=rod_params(domain, arm, n_elements), domain=domains.resolve(domain), dtype=dtype
+    )
+
+
+def agreement(seconds: float | None = None) -> dict:
+    """Largest tip and d3 differences between `RodArm` (float64) and the committed reference path
+    (`cosserat.rollout` with `CosseratParams.from_arm`, as `mjx_arm.fidelity` runs it) on the
+    fidelity report's held-out programs, per domain; `seconds` shortens them."""
+    from mjx_arm import fidelity
+    from mjx_arm.programs import held_program
+
+    length = seconds or fidelity.BABBLE_SECONDS
+    programs = np.stack(
+        [held_program(s, length, fidelity.BABBLE_HOLD_PERIODS) for s in fidelity.BABBLE_SEEDS]
+    )
+    out = {}
+    for domain in fidelity.DOMAINS:
+        reference = cosserat.rollout(programs, CosseratParams.from_arm(ArmParams(), domain))
+        rod = load_rod(domain)
+        poses = rod.rollout(programs)
+        tip = float(np.linalg.norm(poses[..., :3] - reference[..., :3], axis=-1).max())
+        out[domain] = {
+            "programs": len(programs),
+            "seconds": length,
+            "max_tip_fraction_of_L": tip / rod.length_m,
+            "max_d3_difference": float(np.abs(poses[..., 3:] - reference[..., 3:]).max()),
+        }
+    return out
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(
+        prog="python -m mjx_arm.rod_arm",
+        description="Checks that the rod arm (float64) agrees with the committed reference rod path"
+        f" to {AGREEMENT_FRACTION_OF_L:g} of L on the fidelity report's programs (3 x 60 s,"
+        " source and constrained; minutes on a CPU). Exit status 1 if not.",
+    )
+    parser.add_argument("--seconds", type=float, default=None, help="shorten the programs (s)")
+    args = parser.parse_args(argv)
+    result = agreement(args.seconds)
+    worst = max(r["max_tip_fraction_of_L"] for r in result.values())
+    for domain, r in result.items():
+        print(
+            f"{domain}: {r['programs']} x {r['seconds']:g} s, largest tip difference"
+            f" {r['max_tip_fraction_of_L']:.3g} of L, d3 {r['max_d3_difference']:.3g}"
+        )
+    ok = worst <= AGREEMENT_FRACTION_OF_L
+    print(("agrees" if ok else "DOES NOT agree") + f" to {AGREEMENT_FRACTION_OF_L:g} of L")
+    return 0 if ok else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,130 @@
+"""The reference rod as an arm (`mjx_arm.load_rod`): `Arm.rollout`'s interface, the committed
+rod path's numbers, the chain's valves and domains, and its refusals.
+
+Every rollout here is 1 s (10 control periods), so each compiled shape costs a few seconds.
+"""
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+import mjx_arm
+from mjx_arm import cosserat, rod_arm, valve
+from mjx_arm.model_gen import ArmParams
+from mjx_arm.programs import held_program
+
+PERIODS = 10
+LENGTH_M = ArmParams().length_m
+
+
+@pytest.fixture(scope="module")
+def programs() -> np.ndarray:
+    """Two 1 s programs [2, 10, 3] (bar) of targets held 0.2-0.5 s."""
+    return np.stack([held_program(seed, PERIODS / 10, (2, 5)) for seed in (0, 1)])
+
+
+@pytest.fixture(scope="module")
+def source_rod() -> rod_arm.RodArm:
+    return mjx_arm.load_rod("source")
+
+
+@pytest.mark.parametrize("domain", ["source", "constrained"])
+def test_rod_arm_agrees_with_the_committed_rod_path(domain, programs):
+    # The fidelity report's path: cosserat.rollout with CosseratParams.from_arm (float64).
+    reference = cosserat.rollout(programs, cosserat.CosseratParams.from_arm(ArmParams(), domain))
+    poses = mjx_arm.load_rod(domain).rollout(programs)
+    tip = np.linalg.norm(poses[..., :3] - reference[..., :3], axis=-1).max()
+    assert tip <= rod_arm.AGREEMENT_FRACTION_OF_L * LENGTH_M
+    np.testing.assert_allclose(poses[..., 3:], reference[..., 3:], atol=1e-9)
+    # The programs move the tip, so agreement is not two rods at rest.
+    assert np.linalg.norm(poses[:, -1, :3] - poses[:, 0, :3], axis=-1).min() > 0.005
+
+
+def test_shapes_match_arm_rollout_and_batching_changes_nothing(source_rod, programs):
+    batched = source_rod.rollout(programs)
+    single = source_rod.rollout(programs[1])
+    assert batched.shape == (2, PERIODS, 6) and single.shape == (PERIODS, 6)
+    assert batched.dtype == single.dtype == np.float64
+    np.testing.assert_allclose(single, batched[1], atol=1e-12)
+    np.testing.assert_allclose(np.linalg.norm(batched[..., 3:], axis=-1), 1.0, atol=1e-9)
+
+
+def test_commands_saturate_like_the_chain_valves(source_rod):
+    # Above 3.5 bar acts as 3.5, below the 0.2 bar floor (negative included) as the floor.
+    wild = np.tile([9.0, -1.0, 0.0], (PERIODS, 1))
+    clipped = np.tile([3.5, 0.2, 0.2], (PERIODS, 1))
+    poses = source_rod.rollout(np.stack([wild, clipped]))
+    np.testing.assert_array_equal(poses[0], poses[1])
+    assert source_rod.valve == valve.ValveParams()  # the chain's constants, 0.2 s / 0.56 s
+
+
+def test_the_valve_lags_the_command(source_rod):
+    # A chamber stepped to 3.5 bar rises with tau = 0.2 s: after 0.1 s it is far from the
+    # pose the same pressure reaches when held, and still moving after 1 s.
+    poses = source_rod.rollout(np.tile([3.5, 0.2, 0.2], (PERIODS, 1)))
+    held = cosserat.static_pose([3.5, 0.2, 0.2], source_rod.params)
+    rest = source_rod.rest_pose()
+    swing = np.linalg.norm(held[:3] - rest[:3])
+    assert np.linalg.norm(poses[0, :3] - rest[:3]) < 0.3 * swing
+    assert np.linalg.norm(poses[-1, :3] - poses[-2, :3]) > 1e-4
+
+
+def test_domains_map_onto_the_rod():
+    source = rod_arm.rod_params("source")
+    constrained = rod_arm.rod_params("constrained")
+    aged = rod_arm.rod_params("aged")
+    assert source == cosserat.CosseratParams.from_arm(ArmParams(), "source")
+    assert constrained == cosserat.CosseratParams.from_arm(ArmParams(), "constrained")
+    assert aged.damping_per_s == constrained.damping_per_s == 8000.0
+    assert aged.youngs_modulus_pa == pytest.approx(0.7 * constrained.youngs_modulus_pa)
+    assert aged.shear_modulus_pa == pytest.approx(0.7 * constrained.shear_modulus_pa)
+    custom = rod_arm.rod_params(mjx_arm.Domain(viscosity_scale=3.0, mass_scale=1.1))
+    assert custom.damping_per_s == pytest.approx(2400.0)
+    assert custom.mass_kg == pytest.approx(1.1 * source.mass_kg)
+    assert dataclasses.replace(custom, damping_per_s=800.0, mass_kg=source.mass_kg) == source
+
+
+def test_the_aged_arm_bends_further_than_the_constrained_one(programs):
+    # Same medium, 0.7 x the stiffness: gravity and the chambers move the softer rod further.
+    aged = mjx_arm.load_rod("aged")
+    constrained = mjx_arm.load_rod("constrained")
+    assert aged.rest_pose()[2] < constrained.rest_pose()[2]  # sags lower at rest
+    move = {
+        name: np.linalg.norm(rod.rollout(programs)[:, -1, :3] - rod.rest_pose()[:3], axis=-1)
+        for name, rod in (("aged", aged), ("constrained", constrained))
+    }
+    assert (move["aged"] > move["constrained"]).all()
+
+
+def test_float32_follows_float64(programs):
+    rod32 = mjx_arm.load_rod("source", dtype="float32")
+    poses32 = rod32.rollout(programs)
+    poses64 = mjx_arm.load_rod("source").rollout(programs)
+    assert poses32.dtype == np.float64  # returned as float64, like Arm.rollout
+    tip = np.linalg.norm(poses32[..., :3] - poses64[..., :3], axis=-1).max()
+    assert 0.0 < tip < 1e-3 * LENGTH_M  # different arithmetic, same motion
+
+
+@pytest.mark.parametrize(
+    "bad, message",
+    [
+        (np.zeros((PERIODS, 2)), "must be"),
+        (np.zeros((0, PERIODS, 3)), "must be"),
+        (np.zeros((2, 3, PERIODS, 3)), "must be"),
+        (np.full((PERIODS, 3), np.nan), "non-finite"),
+        (np.ones((PERIODS, 3), dtype=bool), "boolean"),
+    ],
+)
+def test_bad_programs_are_refused_before_simulating(source_rod, bad, message):
+    with pytest.raises(ValueError, match=message):
+        source_rod.rollout(bad)
+
+
+def test_bad_settings_are_refused():
+    with pytest.raises(ValueError, match="dtype"):
+        mjx_arm.load_rod("source", dtype="float16")
+    with pytest.raises(ValueError, match="unknown domain"):
+        mjx_arm.load_rod("underwater")
+    with pytest.raises(ValueError, match="viscosity"):
+        mjx_arm.load_rod(mjx_arm.Domain(viscosity=1.0))
