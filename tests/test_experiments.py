@@ -16,6 +16,7 @@ import time
 import pytest
 
 from experiments import paper, report
+from experiments import attempt as attempt_lib
 from experiments import stages as stages_lib
 from experiments.stages import (
     Chain,
@@ -254,7 +255,7 @@ def test_gpu_stages_run_side_by_side_on_different_gpus(fake):
 
 def test_jobs_deadline_gives_all_stopped_stages_one_grace_period(fake, monkeypatch):
     """Commands that ignore SIGTERM are killed after one grace period, not one each."""
-    monkeypatch.setattr(stages_lib, "STOP_GRACE_S", 2.0)
+    monkeypatch.setattr(attempt_lib, "STOP_GRACE_S", 2.0)
     args = "--sleep 30 --ignore-term"
     chain = three_stage_chain(fake, a_args=f"--text a {args}", c_args=f"--text c {args}")
     start = time.monotonic()
