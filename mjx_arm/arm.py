@@ -3,6 +3,10 @@
 A pressure program is a sequence of chamber commands (bar) at 10 Hz. Each command is held for one
 control period; the valves lag toward it (`mjx_arm.valve`); the pose is read once per period. Both
 backends start from the same rest state and apply identical per-substep pressures.
+
+This module holds the `Arm`, `load` and the pure MJX rollout (`rollout_program`,
+`control_period`); the MuJoCo C rollouts live in `mjx_arm.rollout_c`, the rest state in
+`mjx_arm.rest`. Their public names are re-exported here, where callers have always found them.
 """
 
 from __future__ import annotations
@@ -15,7 +19,6 @@ import math
 import operator
 import os
 from pathlib import Path
-from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
@@ -24,59 +27,20 @@ import numpy as np
 from mujoco import mjx
 from mujoco import rollout as mj_rollout
 
-from mjx_arm import checks, constants, domains, stretch, valve
+from mjx_arm import checks, compile_notice, constants, domains, rest, rollout_c, stretch, valve
 from mjx_arm.checks import check_pressures, validate_model
-from mjx_arm.constants import POSE_DIM
-from mjx_arm.machine import usable_cores
+from mjx_arm.constants import MAX_JOINT_SPEED, POSE_DIM  # noqa: F401  (re-exported)
+from mjx_arm.rest import SETTLED_SPEED  # noqa: F401  (re-exported)
+from mjx_arm.rollout_c import (  # noqa: F401  (re-exported)
+    C_CHUNK,
+    SimState,
+    SimulationDivergedError,
+    raise_if_diverged,
+)
 
-#: A trajectory whose joint speed exceeds this (rad/s or m/s) is treated as diverged.
-MAX_JOINT_SPEED = 1.0e3
 #: jax_default_matmul_precision of every MJX physics step and of the MJX tracker
 #: (`mjx_precision`; None: JAX's default, TensorFloat32 on NVIDIA GPUs, for benchmarks).
 MJX_MATMUL_PRECISION = "highest"
-#: Trajectories per MuJoCo C `mujoco.rollout` call in `Arm.rollout`: each call holds every
-#: substep's full state of a 5 s slice ([chunk, 1250, nstate] float64, with its copies and the
-#: controls, 43 per substep with stretch softening). Measured peak for the committed arm:
-#: 3.3-3.8 MB per trajectory, 0.84 GB for a chunk of 256 (`python -m bench.c_chunk_memory`,
-#: bench/results/cpu/c_chunk_memory.md; 2.6 MB and 0.67 GB for the linear-law arm's 3
-#: controls); 256 still fills every core.
-C_CHUNK = 256
-#: A rest state still moving faster than this (rad/s or m/s) after `_settle`'s time is unsettled.
-SETTLED_SPEED = 1.0e-3
-#: MuJoCo warnings raised when it meets a non-finite or huge state and resets the data.
-_INSTABILITY_WARNINGS = (
-    mujoco.mjtWarning.mjWARN_BADQPOS,
-    mujoco.mjtWarning.mjWARN_BADQVEL,
-    mujoco.mjtWarning.mjWARN_BADQACC,
-)
-
-
-class SimState(NamedTuple):
-    """Batched MuJoCo C simulation states between control periods."""
-
-    physics: np.ndarray
-    """[B, nstate] MuJoCo full-physics states (`mjSTATE_FULLPHYSICS`: time, qpos, qvel, ...)."""
-    pressure_bar: np.ndarray
-    """[B, 3] chamber pressures (bar), which the valves move on from."""
-    diverged: np.ndarray | None = None
-    """[B] bool: the trajectory diverged on its way to this state. MuJoCo C resets a diverged
-    state to the model's reference pose, so `physics` alone cannot tell; `Arm.rollout_c_from`
-    reports every later period of such a trajectory as not ok. None (a state built by hand)
-    means none diverged."""
-
-    def take(self, rows) -> SimState:
-        """The states of the given batch rows (an index array or a slice)."""
-        diverged = None if self.diverged is None else self.diverged[rows]
-        return SimState(self.physics[rows], self.pressure_bar[rows], diverged)
-
-
-class SimulationDivergedError(RuntimeError):
-    """A rollout produced a non-finite or exploding state."""
-
-    def __init__(self, message: str, trajectories: np.ndarray, first_step: np.ndarray):
-        super().__init__(message)
-        self.trajectories = trajectories
-        self.first_step = first_step
 
 
 @dataclasses.dataclass
@@ -171,17 +135,24 @@ class Arm:
           pressures_bar: [T, 3] or [B, T, 3] chamber commands (bar) at 10 Hz.
           backend: "mjx" (JAX, jitted, vmapped over B) or "c" (MuJoCo C `mujoco.rollout`,
             multi-threaded over B).
-          chunk: "c" only: trajectories per `mujoco.rollout` call, which bounds memory (see
-            `C_CHUNK`); the poses do not depend on it. MJX runs the whole batch in one call
-            (one compilation per batch size).
+          chunk: "c" only: trajectories per `mujoco.rollout` call (an int >= 1), which bounds
+            memory (see `C_CHUNK`); the poses do not depend on it. MJX runs the whole batch in
+            one call (one compilation per batch size, announced on stderr the first time:
+            `mjx_arm.compile_notice`).
 
         Returns:
           [T, 6] or [B, T, 6] float64 poses: tip position (m) then unit d3.
 
         Raises:
-          ValueError: bad shape (an empty batch included), non-finite pressures, or chunk < 1.
+          ValueError: bad shape (an empty batch included), non-finite pressures, chunk < 1, or
+            an unknown backend.
+          TypeError: pressures that are not real numbers (bools, strings), or a chunk that is
+            not an int (2.5, '8', None).
           SimulationDivergedError: a trajectory's state became non-finite or exploded.
         """
+        if backend not in ("mjx", "c"):
+            raise ValueError(f"backend must be 'mjx' or 'c', got {backend!r}")
+        chunk = rollout_c.check_chunk(chunk)
         batched = check_pressures(pressures_bar)
         if backend == "mjx":
             poses, ok = self._rollout_mjx(batched)
@@ -189,7 +160,7 @@ class Arm:
             poses, ok = self._rollout_c(batched, chunk=chunk)
         else:
             raise ValueError(f"backend must be 'mjx' or 'c', got {backend!r}")
-        _raise_if_diverged(ok)
+        raise_if_diverged(ok)
         return poses if np.ndim(pressures_bar) == 3 else poses[0]
 
     def rollout_with_qpos(
@@ -201,9 +172,10 @@ class Arm:
           (qpos [T, nq] or [B, T, nq], poses [T, 6] or [B, T, 6]), both at the instant `rollout`
           reads the pose.
         """
+        chunk = rollout_c.check_chunk(chunk)
         batched = check_pressures(pressures_bar)
         poses, ok, qpos = self._rollout_c(batched, with_qpos=True, chunk=chunk)
-        _raise_if_diverged(ok)
+        raise_if_diverged(ok)
         return (qpos, poses) if np.ndim(pressures_bar) == 3 else (qpos[0], poses[0])
 
     def rollout_fn(self):
@@ -240,7 +212,9 @@ class Arm:
 
     def _rollout_mjx(self, batched: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         commands = jnp.asarray(batched, dtype=jnp.float32)
-        poses, ok = self._jit_batched(self.mjx_model, commands)
+        jitted = self._jit_batched
+        compile_notice.announce_compile((id(jitted), commands.shape), *commands.shape[:2])
+        poses, ok = jitted(self.mjx_model, commands)
         return np.asarray(poses, dtype=np.float64), np.asarray(ok)
 
     def rest_state(self, batch: int = 1) -> SimState:
@@ -250,23 +224,15 @@ class Arm:
         Raises:
           ValueError: `batch` is not a whole number >= 1.
         """
+        if isinstance(batch, bool | np.bool_):
+            raise ValueError(f"batch must be an int >= 1, got {batch!r}")
         try:
             batch = operator.index(batch)
         except TypeError:
             raise ValueError(f"batch must be an int >= 1, got {batch!r}") from None
         if batch < 1:
             raise ValueError(f"batch must be an int >= 1, got {batch}")
-        data = mujoco.MjData(self.mj_model)
-        data.qpos[:], data.qvel[:] = self.rest_qpos, self.rest_qvel
-        data.act[:] = 0.0
-        spec = mujoco.mjtState.mjSTATE_FULLPHYSICS
-        physics = np.zeros(mujoco.mj_stateSize(self.mj_model, spec))
-        mujoco.mj_getState(self.mj_model, data, physics, spec)
-        return SimState(
-            physics=np.tile(physics, (batch, 1)),
-            pressure_bar=np.full((batch, 3), self.valve.p_min_bar),
-            diverged=np.zeros(batch, dtype=bool),
-        )
+        return rollout_c.rest_state(self, batch)
 
     def rollout_c_from(
         self,
@@ -278,7 +244,8 @@ class Arm:
         """MuJoCo C rollouts of programs from given states, e.g. to continue a rollout.
 
         Args:
-          start: B states to start from (`rest_state`, or the end state of an earlier call).
+          start: B states to start from, a `SimState` (`rest_state`, or the end state of an
+            earlier call).
           pressures_bar: [B, T, 3] chamber commands (bar) at 10 Hz; saturated like `rollout`'s.
           pool: a `mujoco.rollout.Rollout` to reuse across many short calls (one is made per
             call otherwise).
@@ -289,7 +256,13 @@ class Arm:
           calls give the same poses as one call over the joined program, and the same flags: a
           trajectory that diverged in an earlier call (its end state's `diverged`), or starts
           from a non-finite state, is not ok at any period.
+
+        Raises:
+          TypeError: `start` is not a `SimState`, or `chunk` not an int. ValueError: bad
+          pressures (as `rollout`), or their batch differs from the states'.
         """
+        start = rollout_c.check_state(start)
+        chunk = rollout_c.check_chunk(chunk)
         commands = valve.saturate(check_pressures(pressures_bar), self.valve, xp=np)
         if np.ndim(pressures_bar) != 3 or start.physics.shape[0] != commands.shape[0]:
             raise ValueError(
@@ -297,122 +270,22 @@ class Arm:
                 f" {np.shape(pressures_bar)}"
             )
         if pool is None:
-            with self._pool(commands.shape[0], chunk) as own_pool:
-                poses, ok, end, _ = self._rollout_c_batch(start, commands, own_pool, False, chunk)
+            with rollout_c.make_pool(commands.shape[0], chunk) as own_pool:
+                poses, ok, end, _ = rollout_c.rollout_batch(
+                    self, start, commands, own_pool, False, chunk
+                )
         else:
-            poses, ok, end, _ = self._rollout_c_batch(start, commands, pool, False, chunk)
+            poses, ok, end, _ = rollout_c.rollout_batch(self, start, commands, pool, False, chunk)
         return poses, ok, end
-
-    @staticmethod
-    def _pool(n_batch: int, chunk: int) -> mj_rollout.Rollout:
-        """A thread pool for MuJoCo C rollouts of `n_batch` trajectories, `chunk` at a time."""
-        return mj_rollout.Rollout(nthread=min(usable_cores(), n_batch, max(chunk, 1)))
 
     def _rollout_c(self, batched: np.ndarray, with_qpos: bool = False, chunk: int = C_CHUNK):
         commands = valve.saturate(batched, self.valve, xp=np)
-        with self._pool(batched.shape[0], chunk) as pool:
+        with rollout_c.make_pool(batched.shape[0], chunk) as pool:
             start = self.rest_state(batched.shape[0])
-            poses, ok, _, qpos = self._rollout_c_batch(start, commands, pool, with_qpos, chunk)
-        return (poses, ok, qpos) if with_qpos else (poses, ok)
-
-    def _rollout_c_batch(
-        self,
-        start: SimState,
-        commands: np.ndarray,
-        pool: mj_rollout.Rollout,
-        with_qpos: bool,
-        chunk: int,
-    ):
-        """`_rollout_c_chunks` over the batch, `chunk` trajectories at a time.
-
-        Trajectories are independent and MuJoCo C is deterministic per trajectory, so the
-        results equal one call over the whole batch; only the peak memory differs.
-        """
-        if operator.index(chunk) < 1:
-            raise ValueError(f"chunk must be >= 1, got {chunk}")
-        n_batch = commands.shape[0]
-        if n_batch <= chunk:
-            return self._rollout_c_chunks(start, commands, pool, with_qpos)
-        parts = [
-            self._rollout_c_chunks(start.take(rows), commands[rows], pool, with_qpos)
-            for rows in (slice(b, b + chunk) for b in range(0, n_batch, chunk))
-        ]
-        poses, ok, ends, qpos = zip(*parts, strict=True)
-        end = SimState(*(np.concatenate(fields) for fields in zip(*ends, strict=True)))
-        qpos = np.concatenate(qpos) if with_qpos else None
-        return np.concatenate(poses), np.concatenate(ok), end, qpos
-
-    def _rollout_c_chunks(
-        self,
-        start: SimState,
-        commands: np.ndarray,
-        pool: mj_rollout.Rollout,
-        with_qpos: bool,
-        chunk_periods: int = 50,
-    ):
-        """Saturated commands [B, T, 3] from `start` -> (poses, ok, end state, qpos or None).
-
-        The batch goes to `pool` whole; chunk_periods (50 = 5 s) bounds the substep states held.
-        """
-        m = self.mj_model
-        n_batch, n_periods, _ = commands.shape
-        state = np.array(start.physics, dtype=np.float64)
-        pressure = np.array(start.pressure_bar, dtype=np.float64)
-        poses = np.zeros((n_batch, n_periods, POSE_DIM))
-        ok = np.ones((n_batch, n_periods), dtype=bool)
-        # A trajectory that diverged earlier (or starts non-finite) stays diverged: MuJoCo C would
-        # reset it and carry on from the reference pose as if nothing had happened.
-        ok[:, 0] = np.isfinite(state).all(-1)
-        if start.diverged is not None:
-            ok[:, 0] &= ~np.asarray(start.diverged, dtype=bool)
-        qpos = np.zeros((n_batch, n_periods, m.nq)) if with_qpos else None
-        datas = [mujoco.MjData(m) for _ in range(max(pool.nthread, 1))]
-        sensor_pos = _tip_pose_sensor_adr(m)
-        for begin in range(0, n_periods, chunk_periods):
-            stop = min(begin + chunk_periods, n_periods)
-            ctrl = _chunk_controls(pressure, commands[:, begin:stop], self, m.nu)
-            pressure = ctrl[:, -1, self.actuator_ids]
-            out_state, sensordata = pool.rollout(
-                m,
-                datas,
-                state,
-                ctrl,
-                nstep=ctrl.shape[1],
-                control_spec=mujoco.mjtState.mjSTATE_CTRL,
+            poses, ok, _, qpos = rollout_c.rollout_batch(
+                self, start, commands, pool, with_qpos, chunk
             )
-            times = out_state[:, :, 0]
-            expected = state[:, :1] + self.timestep_s * np.arange(1, ctrl.shape[1] + 1)
-            fine = np.isfinite(out_state).all(-1) & np.isclose(times, expected, atol=1e-6)
-            ok[:, begin:stop] &= fine[:, self.n_substeps - 1 :: self.n_substeps]
-            # Sensors see the state before each step's integration; so do these states.
-            before = np.concatenate([state[:, None], out_state[:, :-1]], axis=1)
-            before = before[:, self.n_substeps - 1 :: self.n_substeps]
-            if sensor_pos is not None:
-                sd = sensordata[:, self.n_substeps - 1 :: self.n_substeps]
-                poses[:, begin:stop] = sd[..., sensor_pos : sensor_pos + POSE_DIM]
-            else:
-                poses[:, begin:stop] = self._poses_from_states(before)
-            if with_qpos:
-                qpos[:, begin:stop] = before[..., 1 : 1 + m.nq]  # full state: time, qpos, ...
-            state = out_state[:, -1].copy()
-        # Once diverged, stay diverged (MuJoCo C resets the state after a bad step).
-        ok = np.logical_and.accumulate(ok, axis=1)
-        end = SimState(physics=state, pressure_bar=pressure, diverged=~ok[:, -1])
-        return poses, ok, end, qpos
-
-    def _poses_from_states(self, states: np.ndarray) -> np.ndarray:
-        """Poses [..., 6] of full-physics states [..., nstate], via forward kinematics."""
-        m = self.mj_model
-        data = mujoco.MjData(m)
-        flat = states.reshape(-1, states.shape[-1])
-        out = np.zeros((flat.shape[0], POSE_DIM))
-        spec = mujoco.mjtState.mjSTATE_FULLPHYSICS
-        for i, s in enumerate(flat):
-            mujoco.mj_setState(m, data, s, spec)
-            mujoco.mj_kinematics(m, data)
-            out[i, :3] = data.site_xpos[self.tip_site_id]
-            out[i, 3:] = data.site_xmat[self.tip_site_id].reshape(3, 3)[:, 2]
-        return out.reshape(states.shape[:-1] + (POSE_DIM,))
+        return (poses, ok, qpos) if with_qpos else (poses, ok)
 
     def rest_pose(self) -> np.ndarray:
         """The tip pose [6] at rest."""
@@ -422,42 +295,6 @@ class Arm:
         return np.concatenate(
             [data.site_xpos[self.tip_site_id], data.site_xmat[self.tip_site_id].reshape(3, 3)[:, 2]]
         )
-
-
-def _tip_pose_sensor_adr(m: mujoco.MjModel) -> int | None:
-    """Address in sensordata of the tip pose, if the model has framepos + framezaxis sensors of the
-    tip site named tip_pos and tip_d3, adjacent; None otherwise (poses then come from states)."""
-    try:
-        pos, d3 = m.sensor("tip_pos"), m.sensor("tip_d3")
-    except KeyError:
-        return None
-    adjacent = (
-        pos.type[0] == mujoco.mjtSensor.mjSENS_FRAMEPOS
-        and d3.type[0] == mujoco.mjtSensor.mjSENS_FRAMEZAXIS
-        and d3.adr[0] == pos.adr[0] + 3
-        and pos.objid[0] == m.site(constants.TIP_SITE).id
-        and d3.objid[0] == pos.objid[0]
-    )
-    return int(pos.adr[0]) if adjacent else None
-
-
-def _chunk_controls(pressure, commands, arm: Arm, nu: int) -> np.ndarray:
-    """Per-substep controls [B, periods * n_substeps, nu] for held commands [B, periods, 3]."""
-    n_batch, periods, _ = commands.shape
-    sub = np.zeros((n_batch, periods, arm.n_substeps, 3))
-    p = np.asarray(pressure, dtype=np.float64)
-    for k in range(periods):
-        sub[:, k] = np.moveaxis(
-            valve.substep_pressures(
-                p, commands[:, k], arm.n_substeps, arm.timestep_s, arm.valve, xp=np
-            ),
-            0,
-            1,
-        )
-        p = sub[:, k, -1]
-    ctrl = arm.chamber_controls.numpy(sub.reshape(n_batch, -1, 3))
-    assert ctrl.shape[-1] == nu
-    return ctrl
 
 
 def rollout_program(
@@ -565,70 +402,6 @@ def control_period(
     return control_step
 
 
-def _raise_if_diverged(ok: np.ndarray) -> None:
-    """ok: [B, T] flags."""
-    bad = ~ok[:, -1]
-    if bad.any():
-        trajectories = np.flatnonzero(bad)
-        first_step = np.array([np.argmin(ok[b]) for b in trajectories])
-        raise SimulationDivergedError(
-            f"simulation diverged (non-finite or exploding state) in {len(trajectories)}"
-            f" trajectory(ies): {trajectories[:10].tolist()}, first at control step(s)"
-            f" {first_step[:10].tolist()}. Lower the timestep or raise Domain.inertia_scale.",
-            trajectories,
-            first_step,
-        )
-
-
-def _settle(
-    m: mujoco.MjModel, p_min: float, max_time_s: float = 60.0
-) -> tuple[np.ndarray, np.ndarray, str | None]:
-    """Rest state: chambers at the valve floor, stepped until the arm stops moving.
-
-    Returns:
-      (rest qpos [nq], rest qvel [nv] (zeros), None), or a description of why the model has no
-      rest in place of None: it diverged (MuJoCo met a bad state and reset the data, or a speed
-      passed MAX_JOINT_SPEED), still moves faster than SETTLED_SPEED after `max_time_s`, or
-      rests absurdly far (its tip moved more than twice the arm's length from the reference
-      pose; an explicit drag instability can stretch a slide joint by kilometres while every
-      number stays finite).
-    """
-    data = mujoco.MjData(m)
-    data.ctrl[:] = stretch.from_model(m).numpy(np.full(3, p_min))
-    steps_per_check = max(1, int(0.1 / m.opt.timestep))
-    speed = 0.0
-    for _ in range(int(max_time_s / 0.1)):
-        mujoco.mj_step(m, data, nstep=steps_per_check)
-        speed = float(np.abs(data.qvel).max(initial=0.0))
-        reset = sum(data.warning[w].number for w in _INSTABILITY_WARNINGS)
-        if reset or not np.isfinite(data.qpos).all() or not speed < MAX_JOINT_SPEED:
-            return data.qpos.copy(), np.zeros(m.nv), "it diverged while settling"
-        if speed < 1e-7:
-            break
-    if speed > SETTLED_SPEED:
-        return (
-            data.qpos.copy(),
-            np.zeros(m.nv),
-            f"it still moves at {speed:.3g} after {max_time_s} s",
-        )
-    # Tip displacement from the reference pose against the base-to-tip distance there.
-    tip_body = m.site_bodyid[m.site(constants.TIP_SITE).id]
-    reference = mujoco.MjData(m)
-    mujoco.mj_kinematics(m, reference)
-    site = m.site(constants.TIP_SITE).id
-    length = np.linalg.norm(reference.site_xpos[site] - reference.xpos[m.body_rootid[tip_body]])
-    mujoco.mj_kinematics(m, data)
-    moved = float(np.linalg.norm(data.site_xpos[site] - reference.site_xpos[site]))
-    if moved > 2.0 * length:
-        return (
-            data.qpos.copy(),
-            np.zeros(m.nv),
-            f"its tip rests {moved:.3g} m from the reference pose, over twice the arm's length"
-            f" ({length:.3g} m)",
-        )
-    return data.qpos.copy(), np.zeros(m.nv), None
-
-
 def load(
     path: str | os.PathLike | None = None,
     domain: str | domains.Domain = "source",
@@ -678,7 +451,7 @@ def load(
     inertia_scale = domains.apply(mj_model, domain, source, solid)
     mujoco.mj_setConst(mj_model, mujoco.MjData(mj_model))
     valve_params = checks.valve_params(mj_model, source)
-    rest_qpos, rest_qvel, problem = _settle(mj_model, valve_params.p_min_bar)
+    rest_qpos, rest_qvel, problem = rest.settle(mj_model, valve_params.p_min_bar)
     if problem is not None:
         how = "picked automatically" if domain.inertia_scale is None else "set by the domain"
         raise SimulationDivergedError(

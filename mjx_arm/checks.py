@@ -77,11 +77,19 @@ def check_pressures(pressures_bar) -> np.ndarray:
       The program as a float array [B, T, 3] (B = 1 for a single program).
 
     Raises:
+      TypeError: values that are not real numbers in bar: bools (a mask passed by mistake would
+        otherwise run as 0 and 1 bar), strings, complex numbers.
       ValueError: wrong shape (an empty batch or program included: it would fail later, in a
         reshape or after seconds of MJX compilation), or a non-finite value (the message names
         where).
     """
-    p = np.asarray(pressures_bar, dtype=np.float64)
+    raw = np.asarray(pressures_bar)
+    if raw.dtype.kind not in "iuf":
+        raise TypeError(
+            f"pressures_bar must be real numbers in bar (int or float), got an array of"
+            f" {raw.dtype} ({'bools' if raw.dtype.kind == 'b' else raw.dtype.kind!r})"
+        )
+    p = raw.astype(np.float64, copy=False)
     if p.ndim not in (2, 3) or p.shape[-1] != 3 or p.shape[-2] == 0 or p.shape[0] == 0:
         raise ValueError(f"pressures_bar must be [T, 3] or [B, T, 3] with B, T > 0, got {p.shape}")
     batched = p if p.ndim == 3 else p[None]

@@ -72,3 +72,6 @@ BAR_TO_PA = 1.0e5
 PAPER_DAMPING_PER_S = {"source": 800.0, "constrained": 8000.0}
 #: The paper code's simulator step (s) (PyElastica, position Verlet).
 PAPER_TIMESTEP_S = 2e-4
+
+#: A trajectory whose joint speed exceeds this (rad/s or m/s) is treated as diverged.
+MAX_JOINT_SPEED = 1.0e3

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import numbers
 
 import mujoco
 import numpy as np
@@ -52,11 +53,31 @@ class Domain:
     natural frequency <= SPRING_STEP_MARGIN. Use 1.0 to switch it off."""
 
     def __post_init__(self):
+        """Refuses, before any model is touched, what no domain can have: a name that is not a
+        string; for the numbers, a bool, a string or another non-real value (TypeError), or one
+        that is not finite and > 0 (ValueError). Valid numbers of any real type (numpy scalars
+        included) are kept as Python floats."""
+        if not isinstance(self.name, str):
+            raise TypeError(f"Domain.name must be a str, got {type(self.name).__name__}")
         for field in dataclasses.fields(self):
+            if field.name == "name":
+                continue
             value = getattr(self, field.name)
-            if isinstance(value, float | int) and not isinstance(value, bool):
-                if not math.isfinite(value) or value <= 0:
-                    raise ValueError(f"Domain.{field.name} must be finite and > 0, got {value}")
+            if value is None and field.name in _MAY_BE_NONE:
+                continue
+            allowed = "a real number" + (" or None" if field.name in _MAY_BE_NONE else "")
+            if isinstance(value, bool | np.bool_) or not isinstance(value, numbers.Real):
+                raise TypeError(
+                    f"Domain.{field.name} must be {allowed} (finite, > 0), got {value!r} of type"
+                    f" {type(value).__name__}"
+                )
+            if not math.isfinite(value) or value <= 0:
+                raise ValueError(f"Domain.{field.name} must be finite and > 0, got {value}")
+            object.__setattr__(self, field.name, float(value))
+
+
+#: The Domain fields for which None means "the model's own" (see each field's doc).
+_MAY_BE_NONE = ("viscosity", "viscosity_scale", "inertia_scale")
 
 
 SOURCE = Domain(name="source")

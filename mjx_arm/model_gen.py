@@ -20,6 +20,7 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import math
+import numbers
 import sys
 from pathlib import Path
 
@@ -236,7 +237,13 @@ class ArmParams:
         return self.stretch_armature_scale * self.segment_mass_kg
 
     def validate(self) -> None:
-        """Raises ValueError for parameters that cannot make a model."""
+        """Raises ValueError for parameters that cannot make a model (TypeError for an
+        n_segments that is not a whole number, e.g. 10.5)."""
+        if isinstance(self.n_segments, bool) or not isinstance(self.n_segments, numbers.Integral):
+            raise TypeError(
+                f"n_segments must be an int >= 2 (rigid segments in the chain), got"
+                f" {self.n_segments!r} of type {type(self.n_segments).__name__}"
+            )
         if self.n_segments < 2:
             raise ValueError(f"n_segments must be >= 2, got {self.n_segments}")
         if not 0.0 < self.chamber_length_m <= self.length_m:

@@ -31,16 +31,16 @@ def test_rollout_pools_take_their_threads_from_it(monkeypatch):
     """MuJoCo C rollouts size their thread pools by usable_cores, and the poses do not depend on
     the thread count."""
     import mjx_arm
-    from mjx_arm.arm import Arm
+    from mjx_arm.rollout_c import make_pool
 
     arm = mjx_arm.load("models/softarm.xml", "constrained")
     program = np.full((3, 20, 3), 1.0)
     monkeypatch.setenv(machine.THREADS_ENV, "1")
-    with Arm._pool(8, 8) as pool:
+    with make_pool(8, 8) as pool:
         assert pool.nthread == 1
     one_thread = arm.rollout(program, backend="c")
     monkeypatch.setenv(machine.THREADS_ENV, "2")
-    with Arm._pool(8, 8) as pool, Arm._pool(1, 8) as single:
+    with make_pool(8, 8) as pool, make_pool(1, 8) as single:
         assert pool.nthread == 2
         assert single.nthread == 1  # never more threads than trajectories
     assert np.array_equal(arm.rollout(program, backend="c"), one_thread)
