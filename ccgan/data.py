@@ -21,6 +21,7 @@ do not belong together (another domain, another arm, other program lengths or un
 
 from __future__ import annotations
 
+import hashlib
 import os
 from collections.abc import Sequence
 from typing import NamedTuple
@@ -400,10 +401,12 @@ def check_splits(d: DomainData, n_val: int, flag: str = "the files") -> str | No
       them are trained on (the chain's ccgan_large holds out 3 of its 10).
 
     Raises:
-      mjx_arm.dataset.DatasetError: naming the files and their splits.
+      mjx_arm.dataset.DatasetError: naming the files and their splits; or, first, as
+        `check_identities`.
     """
     from mjx_arm.dataset import DatasetError
 
+    check_identities(d, n_val, flag)
     listing = _listing(d.paths, [split for split, _ in d.splits])
     kinds = [split for split, _ in d.splits]
     if "train" not in kinds and "val" in kinds:
@@ -432,6 +435,63 @@ def check_splits(d: DomainData, n_val: int, flag: str = "the files") -> str | No
             f" {n_val_files} holds out the whole validation file)"
         )
     return None
+
+
+def array_digest(*arrays: np.ndarray) -> str:
+    """sha256 (hex) of the arrays' shapes, dtypes and bytes, in order: equal for equal data,
+    whatever the file's name, split or other metadata."""
+    h = hashlib.sha256()
+    for a in arrays:
+        a = np.ascontiguousarray(a)
+        h.update(f"{a.dtype.str}{a.shape}".encode())
+        h.update(a.tobytes())
+    return h.hexdigest()
+
+
+def check_identities(d: DomainData, n_val: int, flag: str = "the files") -> None:
+    """Refuses a slot whose held-out trajectories are also trained on, judged by content.
+
+    Names and splits do not show a file listed twice, a training file copied as a validation
+    file, or one trajectory saved in both: each would hold out a trajectory that training has
+    seen, and the held-out error would measure memory. So two files with the same arrays
+    (`array_digest` of pressures and poses) are refused, and so is any of the last `n_val`
+    trajectories (held out by `prepare`) whose arrays equal those of a trained one.
+
+    Args:
+      d: one slot's files (`read_domain`; `d.splits` gives each file's trajectories).
+      n_val: trajectories held out (TrainConfig.n_val).
+      flag: the option that named the files, for messages.
+
+    Raises:
+      mjx_arm.dataset.DatasetError: one line naming both files (or trajectories) and the digest.
+    """
+    from mjx_arm.dataset import DatasetError
+
+    starts = np.cumsum([0, *(n for _, n in d.splits)])
+    seen: dict[str, str] = {}
+    for path, a, b in zip(d.paths if d.splits else (), starts[:-1], starts[1:], strict=True):
+        digest = array_digest(d.pressures_bar[a:b], d.poses[a:b])
+        if digest in seen:
+            raise DatasetError(
+                f"{flag}: {seen[digest]} and {path} hold the same data (sha256 {digest[:12]}),"
+                " so held-out trajectories would be trained on; list each file once"
+            )
+        seen[digest] = path
+    n = d.pressures_bar.shape[0]
+    n_train = max(n - n_val, 0)
+
+    def where(i: int) -> str:
+        f = int(np.searchsorted(starts, i, side="right")) - 1
+        return f"{d.paths[f]}[{i - starts[f]}]" if d.splits else f"trajectory {i}"
+
+    trained = {array_digest(d.pressures_bar[i], d.poses[i]): i for i in range(n_train)}
+    for i in range(n_train, n):
+        j = trained.get(array_digest(d.pressures_bar[i], d.poses[i]))
+        if j is not None:
+            raise DatasetError(
+                f"{flag}: held-out trajectory {where(i)} is also trained on: {where(j)} holds"
+                " the same arrays; hold out trajectories that training does not see"
+            )
 
 
 def read_translation_files(

@@ -431,7 +431,7 @@ def test_k_chosen_in_the_target_arm_like_the_authors_and_resumed_exactly(tiny_se
 
     kw = dict(seeds=(0, 1), forward_model=fconf.model, progress=False, k_choice=judge)
     full, rows = train_lib.train_and_evaluate(config, data, fparams, tmp_path / "full", **kw)
-    choices = train_lib._read_rows(tmp_path / "full" / "k_choices.csv")
+    choices = train_lib.read_rows(tmp_path / "full" / "k_choices.csv")
     # Before training, after epoch 3 (stretch_every) and after the last (4), for both seeds.
     assert [(r["epoch"], r["seed"]) for r in choices] == [(e, s) for e in (0, 3, 4) for s in (0, 1)]
     last = {r["seed"]: r for r in choices if r["epoch"] == 4}
@@ -474,7 +474,7 @@ def test_k_chosen_in_the_target_arm_like_the_authors_and_resumed_exactly(tiny_se
     resumed, _ = train_lib.train_and_evaluate(config, data, fparams, tmp_path / "cut", **kw)
     assert _params_equal(resumed.params, full.params)
     assert np.array_equal(resumed.k, full.k)
-    assert train_lib._read_rows(tmp_path / "cut" / "k_choices.csv") == choices
+    assert train_lib.read_rows(tmp_path / "cut" / "k_choices.csv") == choices
     for seed in (0, 1):
         a, b = (
             ccgan.load_translator(

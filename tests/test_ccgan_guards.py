@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 
 import mjx_arm
-from ccgan import checkpoint, distill, finetune, load_translator, tune
+from ccgan import checkpoint, distill, load_translator, tune
 from ccgan import cli as cli_lib
 from ccgan import config as config_lib
 from ccgan import data as data_lib
@@ -192,7 +192,7 @@ def test_run_stored_with_stretch_choices_resumes_under_hold_factors(tmp_path):
     path = checkpoint.save(tmp_path / "state.ckpt", {"x": np.zeros(2)}, old)
     with pytest.raises(checkpoint.CheckpointError):
         checkpoint.load(path, expect=meta)
-    checkpoint.load(path, expect=train_lib._resume_expectation(path, meta))
+    checkpoint.load(path, expect=train_lib.resume_expectation(path, meta))
 
 
 def test_committed_translator_config_reads_with_the_renamed_field():
@@ -224,11 +224,6 @@ def test_train_cli_refuses_a_file_as_workdir(tmp_path, files, capsys):
         (config_lib.TrainConfig, {"feedback_impl": "fast"}, "feedback_impl"),
         (tune.SearchSpace, {"window_lengths": (1, 5)}, "window_lengths"),
         (tune.SearchSpace, {"lr_critic": (1e-3, 1e-5)}, "lr_critic"),
-        (finetune.FinetuneConfig, {"steps": 0}, "steps"),
-        (finetune.FinetuneConfig, {"batch_size": 0}, "batch_size"),
-        (finetune.FinetuneConfig, {"n_train": 8, "batch_size": 9}, "batch_size"),
-        (finetune.FinetuneConfig, {"window_s": 2.0, "anchor_s": 2.0}, "anchor_s"),
-        (finetune.FinetuneConfig, {"learning_rates": (1e-3, 0.0)}, "learning_rates"),
         (distill.DistillConfig, {"batch_size": 0}, "batch_size"),
         (distill.DistillConfig, {"epochs": 0}, "epochs"),
         (distill.DistillConfig, {"n_val": 0}, "n_val"),
@@ -256,11 +251,6 @@ def shipped():
 @pytest.mark.parametrize(
     "main, flags, named",
     [
-        (finetune.main, ["--steps", "0"], "--steps"),
-        (finetune.main, ["--window-s", "2", "--anchor-s", "2"], "--anchor-s"),
-        (finetune.main, ["--n-train", "8", "--batch-size", "9"], "--batch-size"),
-        (finetune.main, ["--learning-rates", "1e-3", "-1"], "--learning-rates"),
-        (finetune.main, ["--domain", "source"], "--domain"),
         (distill.main, ["--batch-size", "0"], "--batch-size"),
         (distill.main, ["--epochs", "0"], "--epochs"),
         (distill.main, ["--learning-rate", "0"], "--learning-rate"),
@@ -277,8 +267,8 @@ def test_stage_clis_refuse_bad_options_before_any_work(
     assert not out.exists()  # no teacher cache, no translator
 
 
-@pytest.mark.parametrize("main", [finetune.main, distill.main])
-def test_stage_clis_refuse_bad_paths(tmp_path, small_arm, shipped, main, capsys):
+def test_stage_clis_refuse_bad_paths(tmp_path, small_arm, shipped, capsys):
+    main = distill.main
     out = tmp_path / "out"
     base = ["--translators", shipped, "--out"]
     assert "--model" in usage_error(
@@ -298,21 +288,19 @@ def test_stage_clis_refuse_bad_paths(tmp_path, small_arm, shipped, main, capsys)
 def test_stages_simulate_the_arm_named_by_model(tmp_path, small_arm, shipped, capsys):
     """Default: the I-Support arm the committed translators were trained on; a translator
     labelled for another arm or domain is refused, an unlabelled one unless trusted."""
-    for module in (finetune, distill):
-        p = module.build_parser()
-        assert p.parse_args(["--translators", "t", "--out", "o"]).model == str(
-            constants.TRANSLATOR_MODEL_PATH
-        )
+    p = distill.build_parser()
+    assert p.parse_args(["--translators", "t", "--out", "o"]).model == str(
+        constants.TRANSLATOR_MODEL_PATH
+    )
     model, model_hash = small_arm
-    p = finetune.build_parser()
     argv = ["--translators", shipped, "--out", str(tmp_path / "o"), "--model", model]
     a = p.parse_args([*argv, "--trust-unlabelled-translators"])
-    stage = finetune.start_stage(p, a, "ccgan.finetune", {}, [])
+    stage = distill.start_stage(p, a, "ccgan.distill", {}, [])
     assert stage.arm_c.model_hash == stage.arm_s.model_hash == model_hash
     assert stage.arm_c.domain.name == "constrained" and stage.arm_s.domain.name == "source"
     assert stage.run["model"] == model and stage.run["model_hash"] == model_hash
-    assert stage.run["method"] == "finetune"
-    assert "--trust-unlabelled-translators" in usage_error(finetune.main, argv, capsys)
+    assert stage.run["method"] == "distill"
+    assert "--trust-unlabelled-translators" in usage_error(distill.main, argv, capsys)
 
     tree, meta = checkpoint.load(shipped)
     for name, labels, named in (
@@ -348,7 +336,7 @@ def labelled(method, target_domain, model_hash) -> dict:
 # ----------------------------------------------------------------------------- help
 
 
-@pytest.mark.parametrize("module", [train_lib, tune, finetune, distill])
+@pytest.mark.parametrize("module", [train_lib, tune, distill])
 def test_every_option_has_help_and_a_shown_default(module):
     name = module.__name__
     p = module.build_parser()
@@ -644,6 +632,47 @@ def test_training_refuses_validation_files_as_training_data_and_vice_versa(
     assert data_lib.check_slot_splits(3, *only_train) == []
 
 
+def test_training_refuses_held_out_trajectories_it_trains_on(tmp_path, files, small_arm, capsys):
+    """Splits are checked by content, not by name or split: a file listed twice, a training file
+    copied as the validation file, or one trajectory in both sets is refused before any work."""
+    from mjx_arm.dataset import load_dataset
+
+    model, h = small_arm
+    s = load_dataset(files["s"])
+    copy_as_val = write_dataset(tmp_path / "s_val.npz", "source", h, seed=1, split="val")
+    # A validation file whose first trajectory is trajectory 2 of the training file.
+    mixed = tmp_path / "mixed_val.npz"
+    other = load_dataset(files["s2"])
+    pressures = np.stack([s.pressures_bar[2], other.pressures_bar[0]])
+    poses = np.stack([s.poses[2], other.poses[0]])
+    low, high = poses.reshape(-1, 6).min(0), poses.reshape(-1, 6).max(0)
+    save_dataset(mixed, Dataset(pressures, poses, low, high, "source", {}, h, seed=9, split="val"))
+    out = tmp_path / "run"
+    tiny = [*TINY_TRAIN, "--model", model, "--workdir", str(out), "--forward-only"]
+    for source, n_val, named in (
+        ([files["s"], files["s"]], "1", ["s.npz and", "s.npz hold the same data"]),
+        ([files["s"], copy_as_val], "4", ["s.npz and", "s_val.npz hold the same data"]),
+        ([files["s"], str(mixed)], "2", ["mixed_val.npz[0] is also trained on", "s.npz[2]"]),
+    ):
+        argv = ["--source", *source, "--constrained", files["c"], *tiny, "--n-val", n_val]
+        err = usage_error(train_lib.main, argv, capsys)
+        assert err.startswith("--source") and all(n in err for n in named), err
+        assert len(err.strip().splitlines()) == 1 and not out.exists()
+    # The constrained slot, through ccgan.tune too.
+    argv = ["--source", files["s"], "--constrained", files["c"], files["c"], "--n-trials", "1"]
+    argv += ["--storage", str(tmp_path / "t.db"), "--report-dir", str(tmp_path / "r")]
+    err = usage_error(tune.main, argv, capsys)
+    assert err.startswith("--constrained") and "hold the same data" in err
+    assert not (tmp_path / "r").exists()
+    # By content alone: the same arrays under another name and split are refused in the library.
+    d_s, d_c = data_lib.read_translation_files([files["s"], copy_as_val], [files["c"]])
+    with pytest.raises(DatasetError, match="hold the same data"):
+        data_lib.check_slot_splits(4, d_s, d_c)
+    # Distinct files, the last 4 trajectories held out: accepted.
+    d_s, _ = data_lib.read_translation_files([files["s"], files["s2"]], [files["c"]])
+    assert data_lib.check_slot_splits(4, d_s, d_c) == []
+
+
 # ----------------------------------------------------------------------------- translator labels
 
 #: The committed CCGAN-GP of the I-Support arm (labelled, with F_c).
@@ -654,9 +683,10 @@ def test_the_default_translator_is_of_the_default_arm(monkeypatch):
     """`load_translator()` with no path reads the chain's rerun on models/softarm.xml: a CCGAN-GP
     into D_c whose recorded arm is that file's `Arm.model_hash`, the arm the stages default to."""
     monkeypatch.delenv("CCGAN_TRANSLATOR", raising=False)
-    assert constants.TRANSLATOR_MODEL_PATH == constants.DEFAULT_MODEL_PATH
-    assert translator_path() == translator_lib.DEFAULT_PATH == COMMITTED
-    arm_hash = mjx_arm.load(constants.DEFAULT_MODEL_PATH).model_hash
+    assert translator_path() == COMMITTED
+    # The arm `mjx_arm.load()` gives with no path, and the one the stages simulate by default.
+    arm_hash = mjx_arm.load().model_hash
+    assert mjx_arm.load(constants.TRANSLATOR_MODEL_PATH).model_hash == arm_hash
     meta, _ = checkpoint.read(translator_path())
     assert translator_lib.translator_labels(meta) == labelled("ccgan", "constrained", arm_hash)
     default = load_translator(model_hash=arm_hash, method="ccgan", target_domain="constrained")
@@ -753,6 +783,6 @@ def test_train_cli_stopped_by_patience_ends_as_finished(tmp_path, files, small_a
     argv += ["--stretch-every", "1", "--patience", "1", "--hold-factors", "1", "2"]
     argv += ["--workdir", str(tmp_path / "run")]
     train_lib.main(argv)  # no SystemExit
-    rows = train_lib._read_rows(tmp_path / "run" / "k_choices.csv")
+    rows = train_lib.read_rows(tmp_path / "run" / "k_choices.csv")
     assert [r["epoch"] for r in rows] == [0, 1, 2]
     assert (tmp_path / "run" / "translator_seed0.ckpt").is_file()
