@@ -1,13 +1,14 @@
-"""What the fine-tune stages of G_c (`ccgan.finetune`, `ccgan.distill`) share.
+"""The fine-tune stage of G_c (`ccgan.distill`): its loop, command line and translator files.
 
-Both stages start from trained translators (one per seed), train every seed's G_c side by side
-(their parameters stacked on a leading axis and vmapped), score them on held-out programs in the
-MuJoCo C simulator and keep each one's best iterate (`BestIterates`), so a stage that makes
+A stage starts from trained translators (one per seed), trains every seed's G_c side by side
+(their parameters stacked on a leading axis and vmapped), scores them on held-out programs in the
+MuJoCo C simulator and keeps each one's best iterate (`BestIterates`), so a stage that makes
 things worse writes the original. `validated_loop` is that loop, with its stopping rules (a
-non-finite loss, a wall-clock budget). `stage_parser` and `start_stage` are their common command
-line (--translators, --seeds, --out, --model, --domain), checked before any simulation, and
-`Stage.write` their output: translator checkpoints with G_c replaced and the stage recorded in
-their metadata (`finetuned_checkpoint`), and the history as JSON.
+non-finite loss, a wall-clock budget). `stage_parser` and `start_stage` are its command line
+(--translators, --seeds, --out, --model, --domain), checked before any simulation, and
+`Stage.write` its output: translator checkpoints with G_c replaced and the stage recorded in
+their metadata under "finetune" (`finetuned_checkpoint`; the key every fine-tuned translator
+file carries, the retired `ccgan.finetune`'s too: docs/ccgan_study.md), and the history as JSON.
 """
 
 from __future__ import annotations
@@ -191,8 +192,8 @@ def save_finetuned(path, source_path, g_c_params, finetune_meta: dict) -> Path:
 def stage_parser(
     module: str, doc: str, translators_required: bool = True
 ) -> argparse.ArgumentParser:
-    """A parser with the flags every fine-tune stage's CLI (`ccgan.finetune`, `ccgan.distill`)
-    has: --translators, --seeds, --out, --model, --domain; `start_stage` checks and loads them.
+    """A parser with the flags of a fine-tune stage's CLI (`ccgan.distill`): --translators,
+    --seeds, --out, --model, --domain; `start_stage` checks and loads them.
     `translators_required` False leaves --translators to the CLI (`ccgan.distill --teacher-only`
     plans without any)."""
     p = cli_parser(module, doc)
