@@ -15,8 +15,8 @@ import time
 
 import pytest
 
-from experiments import paper, report
 from experiments import attempt as attempt_lib
+from experiments import paper, report
 from experiments import stages as stages_lib
 from experiments.stages import (
     Chain,
@@ -349,6 +349,63 @@ def test_report_checks_each_target_shape_by_shape():
     assert "| circle | 2.98 / 0.276 | 7.14 / 0.636 | 0.90 / 0.100 |" in "\n".join(table)
 
 
+def _recorded_chain(tmp_path, stages):
+    """A chain whose stages ({name: (module, args, inputs)}) all finished, as their stage.json
+    records show (no command run)."""
+    chain = Chain(
+        [
+            stages_lib.Stage(name, module, tuple(args) + tuple(f"{{stage:{i}}}" for i in inputs))
+            for name, (module, args, inputs) in stages.items()
+        ],
+        tmp_path,
+        paper.REPO,
+    )
+    for name, (module, args, inputs) in stages.items():
+        chain.folder(name).mkdir(parents=True)
+        key = {"module": module, "args": list(args), "files": {}, "inputs": dict.fromkeys(inputs)}
+        attempts = [{"wall_s": 1.0, "jobs": 1}]
+        manifest = {"key": key, "files": {}, "attempts": attempts, "wall_s": 1.0}
+        manifest |= {"about": name, "machine": "cpu"}
+        (chain.folder(name) / "stage.json").write_text(json.dumps(manifest))
+    return chain
+
+
+CLAIM = "the five shapes were used only for the tables below"
+
+
+def test_report_claims_the_shapes_were_kept_for_the_tables_only_when_the_record_shows_it(
+    tmp_path,
+):
+    kept = _recorded_chain(
+        tmp_path / "kept",
+        {
+            "oracle": ("eval.shapes", ["--methods", "mpc", "oracle"], []),
+            "ccgan": ("ccgan.train", ["--epochs", "1"], []),
+            "table": ("eval.shapes", ["--methods", "none", "ccgan"], ["oracle", "ccgan"]),
+        },
+    )
+    assert report.shape_use(kept) == []
+    assert CLAIM in report.shape_use_line(kept)
+    # A training that reads a stage which scored the shapes: the claim is not made, the record is
+    # named instead.
+    leaked = _recorded_chain(
+        tmp_path / "leaked",
+        {
+            "early": ("eval.shapes", ["--methods", "ccgan", "--out", "{dir}"], []),
+            "ccgan": ("ccgan.train", ["--epochs", "1"], ["early"]),
+            "table": ("eval.shapes", ["--methods", "none", "ccgan"], ["ccgan"]),
+        },
+    )
+    line = report.shape_use_line(leaked)
+    assert CLAIM not in line
+    assert "stage ccgan (ccgan.train) read the outputs of early" in line
+    assert "stage early scored ccgan on the five shapes and ccgan read its outputs" in line
+    config = {"about": "x"}
+    (tmp_path / "c.json").write_text(json.dumps(config))
+    text = report.write(leaked, config, tmp_path / "c.json").read_text()
+    assert CLAIM not in text and "do not show" in text
+
+
 @pytest.mark.slow
 def test_quick_chain_runs_end_to_end_then_skips_everything(tmp_path, capsys, monkeypatch):
     """The committed quick config, every stage for real (tiny babbling, training, distillation,
@@ -361,7 +418,7 @@ def test_quick_chain_runs_end_to_end_then_skips_everything(tmp_path, capsys, mon
     assert paper.main(argv) == 0
     text = (tmp_path / "run" / "paper.md").read_text()
     assert "| circle | 2.98 / 0.276 | 7.14 / 0.636 |" in text
-    assert "the five shapes were used only for the tables below" in text
+    assert CLAIM in text
     # Its commands name the run folder DIR, as a person would rerun them anywhere.
     assert "--out DIR/table" in text and str(tmp_path) not in text
     _, stages = load_config(config)
