@@ -52,11 +52,33 @@ def _compilation_cache_dir() -> str | None:
     if setting.lower() in ("0", "off", "false", "no", "none"):
         return None
     if setting and setting.lower() not in ("1", "on", "true", "yes"):
-        return _os.path.abspath(_os.path.expanduser(setting))
+        return _checked_cache_dir(setting)
     cache_home = _os.environ.get("XDG_CACHE_HOME") or _os.path.join(
         _os.path.expanduser("~"), ".cache"
     )
     return _os.path.join(cache_home, "softarm-ccgan", "jax")
+
+
+def _checked_cache_dir(setting: str) -> str:
+    """SOFTARM_JAX_CACHE's folder, `~` expanded, refused (ValueError, at import) when a `~user`
+    names no user (it would make a folder called `~user` in the working directory) or the folder
+    cannot be written or made."""
+    path = _os.path.expanduser(setting)
+    if path.startswith("~"):
+        raise ValueError(
+            f"{COMPILATION_CACHE_ENV}={setting!r}: {path.split('/')[0]!r} names no user, so"
+            " the path does not expand; give an absolute path, ~/..., or 0 to turn the cache off"
+        )
+    path = _os.path.abspath(path)
+    existing = path
+    while not _os.path.exists(existing) and _os.path.dirname(existing) != existing:
+        existing = _os.path.dirname(existing)
+    if not _os.path.isdir(existing) or not _os.access(existing, _os.W_OK | _os.X_OK):
+        raise ValueError(
+            f"{COMPILATION_CACHE_ENV}={setting!r}: cannot write or make {path} ({existing} is"
+            " not a writable folder); give a writable folder, or 0 to turn the cache off"
+        )
+    return path
 
 
 def _enable_compilation_cache() -> str | None:

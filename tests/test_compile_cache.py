@@ -24,8 +24,9 @@ print(json.dumps({
 """
 
 
-def _probe(tmp_path, **env_changes) -> dict:
-    """Imports mjx_arm in a fresh process with HOME and XDG_CACHE_HOME under tmp_path."""
+def _run_probe(tmp_path, **env_changes) -> subprocess.CompletedProcess:
+    """Imports mjx_arm in a fresh process with HOME and XDG_CACHE_HOME under tmp_path, in
+    tmp_path / "cwd"."""
     ours = ("SOFTARM_JAX_CACHE", "JAX_COMPILATION_CACHE_DIR", "JAX_PERSISTENT_CACHE_")
     env = {k: v for k, v in os.environ.items() if not k.startswith(ours)}
     env.update(HOME=str(tmp_path / "home"), XDG_CACHE_HOME=str(tmp_path / "xdg"))
@@ -34,9 +35,15 @@ def _probe(tmp_path, **env_changes) -> dict:
             env.pop(key, None)
         else:
             env[key] = value
-    out = subprocess.run(
-        [sys.executable, "-c", PROBE], env=env, capture_output=True, text=True, timeout=300
+    cwd = tmp_path / "cwd"
+    cwd.mkdir(exist_ok=True)
+    return subprocess.run(
+        [sys.executable, "-c", PROBE], env=env, cwd=cwd, capture_output=True, text=True, timeout=300
     )
+
+
+def _probe(tmp_path, **env_changes) -> dict:
+    out = _run_probe(tmp_path, **env_changes)
     assert out.returncode == 0, out.stderr
     return json.loads(out.stdout.strip().splitlines()[-1])
 
@@ -77,7 +84,35 @@ def test_jax_own_setting_is_left_alone(tmp_path):
     assert got["dir"] == str(tmp_path / "jax_own")
 
 
-def test_tests_run_with_the_cache_off():
+def test_tilde_expands_to_home(tmp_path):
+    got = _probe(tmp_path, SOFTARM_JAX_CACHE="~/jaxcache")
+    assert got["dir"] == str(tmp_path / "home" / "jaxcache")
+
+
+def test_unknown_user_is_refused_and_makes_no_folder_in_the_working_directory(tmp_path):
+    out = _run_probe(tmp_path, SOFTARM_JAX_CACHE="~nosuchuser/x")
+    assert out.returncode != 0
+    assert "SOFTARM_JAX_CACHE='~nosuchuser/x'" in out.stderr and "names no user" in out.stderr
+    assert list((tmp_path / "cwd").iterdir()) == []
+
+
+def test_unwritable_folder_is_refused(tmp_path):
+    (tmp_path / "a_file").write_text("")
+    out = _run_probe(tmp_path, SOFTARM_JAX_CACHE=str(tmp_path / "a_file" / "jax"))
+    assert out.returncode != 0
+    assert "not a writable folder" in out.stderr.splitlines()[-1]
+
+
+def test_tests_run_with_the_cache_off(monkeypatch):
+    """conftest's SOFTARM_JAX_CACHE=0 reached the package: no cache folder in this process, and
+    the same reading of the variable gives a folder once it is on."""
     import jax
 
+    import mjx_arm
+
     assert jax.config.jax_compilation_cache_dir is None
+    assert mjx_arm.COMPILATION_CACHE_DIR is None
+    assert mjx_arm._compilation_cache_dir() is None
+    monkeypatch.setenv("SOFTARM_JAX_CACHE", "on")
+    monkeypatch.setenv("XDG_CACHE_HOME", "/xdg")
+    assert mjx_arm._compilation_cache_dir() == "/xdg/softarm-ccgan/jax"
