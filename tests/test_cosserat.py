@@ -10,7 +10,7 @@ import math
 import numpy as np
 import pytest
 
-from mjx_arm import cosserat, section
+from mjx_arm import cosserat, rod_dynamics, rod_params, section
 from mjx_arm.constants import P_MIN_BAR
 from mjx_arm.cosserat import CosseratParams
 
@@ -226,6 +226,23 @@ def test_batched_rollout_has_the_right_shape_and_no_nan():
     single = cosserat.rollout(commands[1], params)
     assert single.shape == (4, 6)
     np.testing.assert_allclose(single, poses[1], atol=1e-12)
+
+
+def test_the_split_modules_are_what_cosserat_exports():
+    # mjx_arm.cosserat keeps every name its callers import, as the same objects.
+    for name in ("CosseratParams", "RodState", "LAWS", "DOMAIN_DAMPING_PER_S", "straight_state"):
+        assert getattr(cosserat, name) is getattr(rod_params, name)
+    assert cosserat.tip_pose is rod_dynamics.tip_pose
+    assert set(cosserat.__all__) >= {"rollout", "rollout_fn", "static_pose", "static_state"}
+
+
+def test_rod_constants_cast_arrays_and_keep_scalars():
+    rod = rod_params.make_rod(CosseratParams(n_elements=5))
+    single = rod.astype(np.float32)
+    assert single.node_mass.dtype == single.rot_damp.dtype == np.float32
+    np.testing.assert_allclose(single.inertia, rod.inertia, rtol=1e-6)
+    assert single.dt == rod.dt and isinstance(single.trans_damp, float)
+    assert single.stretch_factors is rod.stretch_factors is True
 
 
 def test_held_pressure_rollout_reaches_the_static_pose():

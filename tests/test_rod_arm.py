@@ -5,6 +5,7 @@ Every rollout here is 1 s (10 control periods), so each compiled shape costs a f
 """
 
 import dataclasses
+import json
 
 import numpy as np
 import pytest
@@ -128,3 +129,16 @@ def test_bad_settings_are_refused():
         mjx_arm.load_rod("underwater")
     with pytest.raises(ValueError, match="viscosity"):
         mjx_arm.load_rod(mjx_arm.Domain(viscosity=1.0))
+
+
+def test_throughput_bench_writes_its_table(tmp_path):
+    from bench import rod_throughput
+
+    argv = ["--out", str(tmp_path), "--no-chain", "--dtypes", "float64", "--batch", "1"]
+    rod_throughput.main(argv + ["--seconds", "0.1", "--accuracy-seconds", "0"])
+    stored = json.loads((tmp_path / "rod_throughput.json").read_text())
+    assert [(r["backend"], r["batch"]) for r in stored["rows"]] == [("rod float64", 1)]
+    assert stored["rows"][0]["sim_s_per_wall_s"] > 0 and stored["rows"][0]["finite"]
+    assert stored["command"].startswith("python -m bench.rod_throughput --out")
+    table = (tmp_path / "rod_throughput.md").read_text()
+    assert "| 1 | " in table and "| - | - | - |" in table  # no float32, no chain
