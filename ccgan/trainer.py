@@ -3,8 +3,8 @@
 `make_train(config, data, forward_c_params)` returns a pure `train(key) -> (state, metrics)` that
 runs every epoch as one `lax.scan`, so several seeds train at once with
 `jax.jit(jax.vmap(train))(keys)`. `make_trainer` returns the pieces it is made of (`init`,
-`run_epochs`, `validation_errors`), which `ccgan.train.train_and_evaluate` drives in chunks with
-a CSV log and checkpoints. Every epoch's randomness is `fold_in(key, epoch)`, so epochs run in
+`run_epochs`, `validation_errors`), which `ccgan.training_run.train_and_evaluate` drives in chunks
+with a CSV log and checkpoints. Every epoch's randomness is `fold_in(key, epoch)`, so epochs run in
 chunks end with the parameters of one scan over all of them.
 
 One train step updates all four networks: first both critics (Wasserstein loss + gradient
@@ -13,10 +13,11 @@ identity + lambda_f feedback). The feedback term runs the frozen forward model F
 G_c's commands, each held for k control periods (the hold factor k), and compares every k-th pose
 with the D_s target. Every `stretch_every` epochs, the hold factor k is re-chosen from
 `hold_factors` by the tracking error on held-out D_s trajectories: here through F_c when
-`k_choice` is "forward", in the target-domain simulator by `ccgan.train` (`ccgan.sim_choice`)
-when it is "simulator", the default.
+`k_choice` is "forward", in the target-domain simulator between epochs
+(`ccgan.best_generators`, `ccgan.sim_choice`) when it is "simulator", the default.
 
-This module holds no I/O: files, the command line and resumption are `ccgan.train`'s.
+This module holds no I/O: files and resumption are `ccgan.training_run`'s (with
+`ccgan.run_files`), the command line `ccgan.train`'s.
 """
 
 from __future__ import annotations
@@ -256,7 +257,7 @@ def make_trainer(
             epoch=jnp.zeros((), jnp.int32),
         )
         # Like the authors' code, pick k once before training, with the untrained generator
-        # (in the simulator, `ccgan.train` does it on the host).
+        # (in the simulator, `ccgan.training_run` does it on the host).
         return choose_k(state)[0] if in_jit_choice else state
 
     # Both domains' networks of a type run as one call vmapped over the stacked parameters
