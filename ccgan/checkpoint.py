@@ -142,6 +142,17 @@ def read(path: str | os.PathLike) -> tuple[dict, bytes]:
         raise CheckpointError(f"{path} has unreadable metadata ({type(err).__name__})") from None
 
 
+def payload_sha256(path: str | os.PathLike) -> str:
+    """The sha256 (hex) of a checkpoint's payload, verified (`read`): it names the stored tree
+    whatever the metadata says (a file whose metadata was rewritten keeps it).
+
+    Raises:
+      CheckpointNotFoundError, CheckpointError: as `read`.
+    """
+    _, payload = read(path)
+    return hashlib.sha256(payload).hexdigest()
+
+
 def load(
     path: str | os.PathLike, target: Any = None, expect: dict | None = None
 ) -> tuple[Any, dict]:

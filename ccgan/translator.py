@@ -52,8 +52,9 @@ MAX_COMMAND_BAR = 10.0
 
 #: The methods a translator file records ("method" in its metadata): `ccgan.train`'s CCGAN-GP
 #: and its WCGAN-GP baseline, and the stages that refine them in the simulator
-#: (`ccgan.finetune`, `ccgan.distill`).
-METHODS = ("ccgan", "wcgan", "finetune", "distill")
+#: (`ccgan.finetune`; `ccgan.distill`: "distill" when it started from a CCGAN-GP translator,
+#: "distill_from_<method>" from another, whose file then records "started_from").
+METHODS = ("ccgan", "wcgan", "finetune", "distill", "distill_from_wcgan", "distill_from_finetune")
 #: What a translator file says it is, each a metadata key: its method, the domains it translates
 #: from and into (mjx_arm.DOMAINS names: "source" -> "constrained" or "aged") and the
 #: `mjx_arm.Arm.model_hash` of the arm it was trained (or last refined) on.
@@ -160,10 +161,15 @@ def check_program(pressures_bar, poses) -> tuple[np.ndarray, np.ndarray]:
       poses: [T, 6] tip position (m) then unit d3.
 
     Raises:
+      TypeError: boolean pressures or poses (a mask passed for a program: True would read as
+        1 bar).
       ValueError: naming the problem: shapes, an empty program, non-finite values (with the
         first bad step), pressures outside PRESSURE_RANGE_BAR, tip positions farther than
         MAX_TIP_DISTANCE_M from the origin, or d3 not of unit length.
     """
+    for name, a in (("pressures", pressures_bar), ("poses", poses)):
+        if np.asarray(a).dtype == np.bool_:
+            raise TypeError(f"{name} are booleans: pass numbers (pressures in bar, poses in m)")
     p = np.asarray(pressures_bar, np.float32)
     x = np.asarray(poses, np.float32)
     if p.ndim != 2 or p.shape[1] != 3 or x.shape != (p.shape[0], 6):
@@ -267,6 +273,7 @@ class Translator:
           (pressures_c [T * k, 3] bar: each translated command held k control periods, k).
 
         Raises:
+          TypeError: boolean pressures or poses (`check_program`).
           ValueError: the program fails `check_program` (shapes, NaN/inf, units).
         """
         p, x = check_program(pressures_s, poses_s)

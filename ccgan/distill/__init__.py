@@ -1,0 +1,260 @@
+"""`ccgan.distill`: G_c fine-tuned by imitation of the simulator's receding-horizon tracker.
+
+The stage's jobs, one module each:
+- `config`: `DistillConfig`, its settings;
+- `teacher`: the programs, the teacher's commands for them and their cache (`teacher.npz`,
+  keyed by everything that made it);
+- `imitation`: the training data, the Adam step, the held-out score and a stopped run's
+  training state;
+- `cli`: the command line's parser and its checks (`python -m ccgan.distill`, whose help is
+  `ccgan.distill.cli`'s docstring) and what it writes (the lineage of each file).
+
+`distill` (the library call) and `main` (the command) are here, where every name they compose
+is the package's own: a caller may replace one of them (a test spies on `make_validation`).
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import signal
+import sys
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+
+import mjx_arm  # noqa: F401  (before jax: sets the XLA CPU flag)
+from ccgan.cli import config_from_args
+from ccgan.distill.cli import (
+    adopt_teacher_from,
+    build_parser,
+    check_teacher_from,
+    plan_teacher_only,
+    record_lineage,
+    summary,
+    writer,
+)
+from ccgan.distill.config import ConfigError, DistillConfig
+from ccgan.distill.imitation import (
+    ImitationData,
+    _best_of_seeds,
+    _epoch,
+    _load_training,
+    _new_history,
+    _resume_key,
+    _save_training,
+    head_weights,
+    imitation_data,
+    init_imitation,
+    make_validation,
+    window_and_whole_x_err_cm,
+    with_generator_unroll,
+)
+from ccgan.distill.teacher import (
+    _stop_check,
+    adopt_teacher,
+    held_out_programs,
+    read_cache_key,
+    teacher_cache_key,
+    teacher_data,
+)
+from ccgan.stage import BestIterates, common_k, start_stage, validated_loop
+from ccgan.translator import Translator
+from tracking import mpc, mpc_mjx
+
+__all__ = [
+    "ConfigError",
+    "DistillConfig",
+    "ImitationData",
+    "adopt_teacher",
+    "build_parser",
+    "distill",
+    "head_weights",
+    "held_out_programs",
+    "imitation_data",
+    "init_imitation",
+    "main",
+    "make_validation",
+    "mpc",
+    "mpc_mjx",
+    "read_cache_key",
+    "start_stage",
+    "teacher_cache_key",
+    "teacher_data",
+    "window_and_whole_x_err_cm",
+    "with_generator_unroll",
+]
+
+
+def distill(
+    translators: list[Translator],
+    arm_s,
+    arm_c,
+    config: DistillConfig,
+    cache: Path | None = None,
+    progress: bool = True,
+    log=print,
+    on_validation=None,
+    stop: threading.Event | None = None,
+    resume: Path | None = None,
+) -> tuple[list[dict], dict]:
+    """Trains each translator's G_c to reproduce the teacher's commands.
+
+    Args:
+      translators: trained translators (the same generator shape; the same k unless
+        `config.hold_factor` sets one), one per seed.
+      arm_s, arm_c: the D_s and D_c arms.
+      config: settings.
+      cache: file for the teacher's commands (read when its settings match, else written).
+      on_validation: optional callable(best parameters per translator, history), called after
+        every validation but the first with the best iterates so far (e.g. to write them, so
+        that a killed run keeps its progress); the history then has "complete": False.
+      stop: once set (e.g. by SIGTERM), the teacher stops after its chunk of source steps
+        (`TrackingStopped`) or training after its epoch, as at `config.max_wall_s`.
+      resume: a file for the training state: written when `stop` stops training (after that
+        epoch's validation), read at the start when saved for the same settings and
+        translators, so that a stopped run goes on from its next epoch instead of from the
+        start (a distillation of 240 epochs takes 200-250 s of one H100, longer than what a
+        deadline leaves of a 10-minute call); removed when training ends otherwise.
+
+    Returns:
+      (best G_c parameters per translator, history: "train_loss" [epochs, S] (weighted mean
+      squared normalised pressure error), "val" {epoch: {"score", "window", "whole"} [S] cm},
+      "teacher_val_x_err_cm" and "stretch_val_x_err_cm" (whole, window), "best_epoch" [S]
+      (0: the original was best),
+      "best_val_x_err_cm" [S], "val_x_err_cm_before" [S] (at this k), "k", "wall_s").
+    """
+    k = config.hold_factor or common_k(translators)
+    n_train = config.n_train_programs  # >= batch_size (DistillConfig checks)
+    t0 = time.perf_counter()
+    translators = with_generator_unroll(translators, config.generator_unroll)
+
+    should_stop = _stop_check(config, t0, stop)
+    data = imitation_data(
+        config, translators[0], arm_s, arm_c, k, cache, log, progress, should_stop
+    )
+    step, stacked, opt_state = init_imitation(translators, config, data)
+    score_arm = arm_c.planning_copy(config.score_substeps)
+    validate = make_validation(translators[0], score_arm, k, data)
+    key = _resume_key(config, k, stacked)
+    saved = None if resume is None else _load_training(resume, key, stacked, opt_state, log)
+
+    def validate_epoch(epoch: int, params) -> np.ndarray:
+        """Scores the parameters, adds the scores to the history; returns the [S] score."""
+        scores = validate(params)
+        history["val"][epoch] = {name: v.tolist() for name, v in scores.items()}
+        return scores["score"]
+
+    if saved is None:
+        first = 1
+        history = _new_history(score_arm, k, data)
+        best = BestIterates.start(stacked, validate_epoch(0, stacked))
+        rng = np.random.default_rng(config.seed)
+    else:
+        done, stacked, opt_state, best, history, rng = saved
+        first = done + 1
+        log(f"resuming from {resume}: {done} of {config.epochs} epochs done")
+    teacher = history["teacher_val_x_err_cm"]
+    log(
+        f"held-out X_err (cm; mean of first {config.window_s} s and whole): before"
+        f" {np.round(history['val'][0]['score'], 4).tolist()}; teacher: window"
+        f" {teacher['window']:.4f}, whole {teacher['whole']:.4f}"
+    )
+    latest: dict = {}  # the last epoch's (epoch, params, opt_state), kept for a stop
+
+    def train_once(epoch: int, params, opt_state):
+        """One pass over the teacher programs in a random order."""
+        order = rng.permutation(n_train)
+        params, opt_state, loss = _epoch(step, params, opt_state, data, order, config.batch_size)
+        history["train_loss"].append(loss.tolist())
+        latest.update(epoch=epoch, params=params, opt_state=opt_state)
+        return params, opt_state, loss
+
+    def report(best: BestIterates) -> None:
+        on_validation(_best_of_seeds(best, history, t0), history)
+
+    best = validated_loop(
+        config.epochs,
+        stacked,
+        opt_state,
+        best,
+        train_once,
+        validate_epoch,
+        None if on_validation is None else report,
+        config=config,
+        t0=t0,
+        desc="distill",
+        unit="epoch",
+        progress=progress,
+        log=log,
+        stop=stop,
+        start=first,
+    )
+    history["complete"] = stop is None or not stop.is_set()
+    if resume is not None and not history["complete"] and latest:
+        _save_training(
+            resume, key, latest["epoch"], latest["params"], latest["opt_state"], best, history, rng
+        )
+        log(f"training state after epoch {latest['epoch']} kept in {resume}")
+    elif resume is not None and history["complete"]:
+        resume.unlink(missing_ok=True)
+    return _best_of_seeds(best, history, t0), history
+
+
+def main(argv=None) -> None:
+    """CLI: `python -m ccgan.distill --translators A.ckpt [B.ckpt ...] --out DIR`."""
+    p = build_parser()
+    a = p.parse_args(argv)
+    if not a.translators and not a.teacher_only:
+        p.error("--translators is required (only --teacher-only plans without translators)")
+    config = config_from_args(p, a, DistillConfig)
+    if not a.translators and config.hold_factor == 0:
+        p.error("--teacher-only without --translators needs --hold-factor (k)")
+    check_teacher_from(p, a)
+    stage = start_stage(p, a, "ccgan.distill", dataclasses.asdict(config), argv)
+    record_lineage(p, a, stage)
+    if config.hold_factor == 0:
+        try:
+            common_k(stage.translators)
+        except ValueError as err:
+            p.error(f"{err}: give --hold-factor")
+    if a.teacher_from:
+        adopt_teacher_from(p, a, config, stage)
+
+    # SIGTERM (a time limit, experiments.stages at its deadline) stops the teacher after its
+    # chunk of source steps (its progress kept) or training after its epoch (its best iterates
+    # written); exit status 143 says the run is unfinished: rerun the same command to go on.
+    stop = threading.Event()
+    previous = signal.signal(signal.SIGTERM, lambda *_: stop.set())
+    try:
+        _run(a, config, stage, stop)
+    except mpc_mjx.TrackingStopped as err:
+        print(f"teacher: {err}: rerun the same command to go on", file=sys.stderr)
+        sys.exit(128 + signal.SIGTERM)
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+    if stop.is_set():
+        print("stopped by SIGTERM: rerun the same command to go on", file=sys.stderr)
+        sys.exit(128 + signal.SIGTERM)
+
+
+def _run(a: argparse.Namespace, config: DistillConfig, stage, stop: threading.Event) -> None:
+    """`main`'s work: the teacher only, or the whole distillation."""
+    if a.teacher_only:
+        plan_teacher_only(config, stage, stop)
+        return
+    write = writer(stage)
+    params, history = distill(
+        stage.translators,
+        stage.arm_s,
+        stage.arm_c,
+        config,
+        cache=stage.out / "teacher.npz",
+        on_validation=write,
+        stop=stop,
+        resume=stage.out / "training_state.npz",
+    )
+    write(params, history)
+    print(summary(stage.out, history))

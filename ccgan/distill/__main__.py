@@ -1,0 +1,5 @@
+"""`python -m ccgan.distill`: the command (`ccgan.distill.main`)."""
+
+from ccgan.distill import main
+
+main()

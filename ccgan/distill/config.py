@@ -1,0 +1,156 @@
+"""The settings of an imitation fine-tune (`DistillConfig`), checked when made."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import mjx_arm  # noqa: F401  (before jax: sets the XLA CPU flag)
+from mjx_arm import arm as mjx_arm_arm
+from tracking.config import ConfigError, check_fields
+
+__all__ = ["ConfigError", "DistillConfig"]
+
+
+@dataclasses.dataclass(frozen=True)
+class DistillConfig:
+    """Settings of an imitation fine-tune."""
+
+    n_train: int = 128
+    """Teacher programs to imitate."""
+    n_val: int = 16
+    """Held-out programs that pick the best iterate."""
+    n_train_full: int = 0
+    """More teacher programs, scaled to the full valve amplitude as the test shapes are
+    (`shape_like_program(full_scale=True)`, their own random stream)."""
+    n_val_full: int = 0
+    """More held-out programs at the full amplitude."""
+    n_train_babble: int = 0
+    """More teacher programs from the babbling family (`mjx_arm.babble`'s, the paper's holds of
+    0.5-3 s between 0 and 3.5 bar, a stream of their own): programs unlike any shape, for a
+    translator that meets programs it was not written for."""
+    n_val_babble: int = 0
+    """More held-out babbling programs."""
+    duration_s: float = 20.0
+    """Length of every program, from rest (s of source time)."""
+    window_s: float = 2.0
+    """The held-out score averages the X_err over the first window_s seconds and the whole."""
+    head_weight: float = 1.0
+    """Weight of the first window_s seconds in the imitation loss (the rest weighs 1): the
+    start from rest is where the oracle is compared and where the teacher's commands change
+    fastest."""
+    horizon_steps: int = 1
+    """The teacher's planning horizon (`tracking.mpc.MpcConfig.horizon_steps`)."""
+    iterations: int = 2
+    """The teacher's Gauss-Newton iterations per step."""
+    epochs: int = 300
+    """Passes over the teacher programs."""
+    batch_size: int = 16
+    """Programs per Adam step."""
+    learning_rate: float = 1e-3
+    """Adam step size."""
+    final_lr_factor: float = 1.0
+    """The step size falls along a cosine from learning_rate to learning_rate x this over the
+    run's epochs (1: constant). At k = 20 the held-out score of the constant rate moved by up to
+    1.8x between validations (docs/distillation.md)."""
+    eval_every: int = 50
+    """Epochs between held-out scores (and the last epoch)."""
+    seed: int = 0
+    """Seed of the programs and of the batch order."""
+    max_wall_s: float = 0.0
+    """Stop training after this many seconds (0: no limit); the best iterate so far is kept."""
+    teacher_backend: str = "c"
+    """Where the teacher plans: "c" (`tracking.mpc`, MuJoCo C on the host's cores, any horizon)
+    or "mjx" (`tracking.mpc_mjx`, every program at once on the accelerator, horizon 1); its
+    commands are scored in MuJoCo C either way. `bench.teacher` measures which is faster."""
+    generator_unroll: int = 1
+    """LSTM time steps per loop iteration of G_c's scans while it trains and is scored (the
+    numerics are unchanged; `bench.distill_step` measures the speed). A whole 60 s program is
+    600 sequential steps per layer, forward and backward."""
+    teacher_substeps: int = 0
+    """Physics steps per control period of the arm the teacher plans in (0: the arm's own, 25 of
+    4 ms). A planning copy (`mjx_arm.Arm.planning_copy`) with 5 runs five times fewer sequential
+    steps; its commands are still scored in the arm itself (`studies.planning_arm` measures what
+    the coarser arm costs the teacher)."""
+    score_substeps: int = 0
+    """Physics steps per control period of the arm the held-out programs are scored in, which
+    picks the kept iterate (0: the arm's own, 25 of 4 ms). A planning copy of 5 scores five
+    times faster (MuJoCo C): the chain's scorings of 48 programs of 900-1,500 simulated s took
+    about 40 s each in the arm, four per run (`docs/chain.md`)."""
+    teacher_shard: int = 0
+    """Programs the teacher plans per call, across splits, the cache written after each (0: a
+    split per call), so that a run stopped at a deadline keeps the shards it finished; with
+    the MJX teacher one call's wall time barely grows with its programs."""
+    hold_factor: int = 0
+    """k, the control periods each command is held, for the teacher and the distilled
+    translators (0: the translators' own, which must agree). G_c gives one command per source
+    step whatever k is; a k at which the D_c arm keeps up with the targets keeps the teacher
+    off the valve limits (`studies.mpc_saturation`)."""
+
+    def __post_init__(self):
+        """Refuses settings that would fail late, after the teacher's commands are computed and
+        cached (ConfigError names the field)."""
+        period = 1.0 / mjx_arm.CONTROL_HZ
+        check_fields(
+            self,
+            at_least={
+                "n_train": 0,
+                "n_val": 0,
+                "n_train_full": 0,
+                "n_val_full": 0,
+                "n_train_babble": 0,
+                "n_val_babble": 0,
+                "duration_s": period,
+                "window_s": period,
+                "horizon_steps": 1,
+                "iterations": 1,
+                "epochs": 1,
+                "batch_size": 1,
+                "eval_every": 1,
+                "seed": 0,
+                "max_wall_s": 0,
+                "hold_factor": 0,
+                "teacher_shard": 0,
+                "teacher_substeps": 0,
+                "score_substeps": 0,
+                "generator_unroll": 1,
+                "final_lr_factor": 0,
+            },
+            above={"head_weight": 0, "learning_rate": 0},
+        )
+        if self.teacher_backend not in ("c", "mjx"):
+            raise ConfigError(
+                "teacher_backend", f"must be 'c' or 'mjx', got {self.teacher_backend!r}"
+            )
+        if self.teacher_backend == "mjx" and self.horizon_steps != 1:
+            raise ConfigError(
+                "horizon_steps", f"must be 1 with teacher_backend 'mjx', got {self.horizon_steps}"
+            )
+        if self.batch_size > self.n_train_programs:
+            raise ConfigError(
+                "batch_size",
+                f"must be <= n_train + n_train_full + n_train_babble = {self.n_train_programs}"
+                f" training programs, got {self.batch_size}",
+            )
+        if self.n_val + self.n_val_full + self.n_val_babble < 1:
+            raise ConfigError(
+                "n_val", "plus n_val_full and n_val_babble must be >= 1 (held-out programs)"
+            )
+
+    @property
+    def n_train_programs(self) -> int:
+        """Training programs of every family."""
+        return self.n_train + self.n_train_full + self.n_train_babble
+
+    def teacher_key(self) -> dict:
+        """The settings the cached teacher commands depend on (not the program counts);
+        `ccgan.distill.teacher.teacher_cache_key` adds k, the arm, its domain, the program
+        families and the planner's other settings."""
+        keys = ("duration_s", "horizon_steps", "iterations", "seed")
+        key = {name: getattr(self, name) for name in keys}
+        if self.teacher_backend != "c":  # caches of the C teacher keep their key
+            key["teacher_backend"] = self.teacher_backend
+            # TensorFloat32 plans (before MJX_MATMUL_PRECISION) are not reused
+            key["mjx_matmul_precision"] = mjx_arm_arm.MJX_MATMUL_PRECISION
+        if self.teacher_substeps:  # caches planned in the arm itself keep their key
+            key["teacher_substeps"] = self.teacher_substeps
+        return key
