@@ -9,11 +9,13 @@ Methods:
   ccgan    the trained CCGAN-GP translator `ccgan.load_translator(path)`. Every translator
            method is skipped with a note when its default checkpoint is absent; one that was
            asked for (--ccgan-path etc.) must load, or the run stops before any work.
-  ccgan_sim  the CCGAN-GP translator fine-tuned in the simulator (`ccgan.finetune` through the
-           MJX rollout, then `ccgan.distill` by imitation of `tracking.mpc`; docs/training.md):
-           results/paper/rerun_2026-11-27/run/ccgan_sim/translator.ckpt or --ccgan-sim-path;
-           the project's best translator, so the main job shows it beside CCGAN-GP and stretch
-           only.
+  ccgan_sim  "distilled" in every table, plot, video and help text: the CCGAN-GP translator
+           distilled in the simulator (`ccgan.distill`, by imitation of `tracking.mpc`;
+           docs/training.md), its file labelled "distill":
+           results/paper/rerun_2026-11-27/run/ccgan_sim/translator.ckpt or --distilled-path
+           (--ccgan-sim-path and the method name "distilled" are accepted too); the project's
+           best translator, so the main job shows it beside CCGAN-GP and stretch only. The key
+           stays ccgan_sim: the committed runs' shapes.json and stage folders use it.
   wcgan    the WCGAN-GP baseline translator: a translator checkpoint given by --wcgan-path or
            found at results/paper/rerun_2026-11-27/run/wcgan/translator.ckpt.
   mpc      receding-horizon tracking in the D_c simulator itself (`tracking.mpc.track`, MuJoCo C,
@@ -59,16 +61,34 @@ METHODS = ("none", "stretch", "ccgan", "ccgan_sim", "wcgan", "mpc", "oracle")
 #: What runs without --methods (the oracle is left out on CPU).
 DEFAULT_METHODS = ("none", "stretch", "ccgan", "ccgan_sim", "wcgan", "oracle")
 TRANSLATOR_METHODS = ("ccgan", "ccgan_sim", "wcgan")
+#: Each method's one name, in tables, plots, videos, notes and help.
+METHOD_NAMES = {
+    "none": "untranslated",
+    "stretch": "stretch only",
+    "ccgan": "CCGAN-GP",
+    "ccgan_sim": "distilled",
+    "wcgan": "WCGAN-GP",
+    "mpc": "MPC in the D_c simulator",
+    "oracle": "the oracle",
+}
+#: Other names a command line accepts for a method (--methods, --robust-methods).
+METHOD_ALIASES = {"distilled": "ccgan_sim"}
 #: Where the simulator-fine-tuned CCGAN-GP is looked for when no path is given.
 CCGAN_SIM_DEFAULT_PATH = TRANSLATORS_DIR / "ccgan_sim" / "translator.ckpt"
 #: Where the WCGAN-GP baseline's translator checkpoint is looked for when no path is given.
 WCGAN_DEFAULT_PATH = TRANSLATORS_DIR / "wcgan" / "translator.ckpt"
 #: The flag that gives each translator method's checkpoint, named in notes and errors.
-PATH_FLAGS = {"ccgan": "--ccgan-path", "wcgan": "--wcgan-path", "ccgan_sim": "--ccgan-sim-path"}
+PATH_FLAGS = {"ccgan": "--ccgan-path", "wcgan": "--wcgan-path", "ccgan_sim": "--distilled-path"}
 #: The "method" a translator file must record (`ccgan.translator.LABELS`) to be scored as each
 #: translator method: a WCGAN-GP file is never reported as CCGAN-GP, a trained one never as
-#: refined in the simulator.
-FILE_METHODS = {"ccgan": ("ccgan",), "wcgan": ("wcgan",), "ccgan_sim": ("distill", "finetune")}
+#: distilled, and a translator distilled from another start (`ccgan.distill` labels it
+#: "distill_from_<start method>", e.g. "distill_from_wcgan") never as the distilled CCGAN-GP.
+FILE_METHODS = {"ccgan": ("ccgan",), "wcgan": ("wcgan",), "ccgan_sim": ("distill",)}
+#: Methods whose translator files are no longer scored: the label -> why.
+RETIRED_FILE_METHODS = {
+    "finetune": "ccgan.finetune, a method retired for the distillation (its numbers are kept"
+    " in docs/ccgan_study.md); distil the CCGAN-GP translator with ccgan.distill instead",
+}
 
 
 class TranslatorError(ValueError):
@@ -102,7 +122,9 @@ class TranslatorMethod:
     With `trained_seeds` ({seed: translator}, several independently trained models) the seed
     picks the model, so a method's mean ± std spans training seeds. `model_hashes` holds the
     `Arm.model_hash`es its files record as the arm they were trained on (files written before
-    that was recorded add none).
+    that was recorded add none); `files` the checkpoint files loaded, the main one first, and
+    `labels` what each records of itself (`ccgan.translator.translator_labels`, with
+    "started_from" where a distillation recorded its start), for the report.
     """
 
     def __init__(
@@ -111,8 +133,12 @@ class TranslatorMethod:
         obj,
         trained_seeds: dict | None = None,
         model_hashes: frozenset = frozenset(),
+        files: tuple[Path, ...] = (),
+        labels: tuple[dict, ...] = (),
     ):
         self.name = name
+        self.files = tuple(Path(f) for f in files)
+        self.labels = tuple(labels)
         self._obj = obj
         self.trained_seeds = trained_seeds or {}
         self.model_hashes = frozenset(model_hashes)
@@ -148,7 +174,8 @@ def load_translator(method: str, cfg) -> tuple[TranslatorMethod | None, str]:
     gives another). One that was asked for (`translator_source`) and is absent, or any that does
     not load, raises, so a run never reports a table without the method it was asked to score.
     Every file must be labelled (`ccgan.translator.check_labels`) as made by the method
-    (`FILE_METHODS`) from "source" into cfg.target_domain; a file without labels (the solid-disc
+    (`FILE_METHODS`; a retired method's file is refused as such, `RETIRED_FILE_METHODS`) from
+    "source" into cfg.target_domain; a file without labels (the solid-disc
     arm's) loads only with cfg.trust_unlabelled_translators. The arms the files record go into
     `TranslatorMethod.model_hashes`, for `check_translator_arms`.
 
@@ -177,12 +204,18 @@ def load_translator(method: str, cfg) -> tuple[TranslatorMethod | None, str]:
         translator_from_checkpoint,
     )
 
-    hashes = set()
+    hashes, loaded_files, file_labels = set(), [], []
 
     def checked(file: Path):
         """The translator in `file` (as `ccgan.load_translator` reads it); notes its arm."""
         try:
             source = checkpoint.load(file)
+            recorded = source[1].get("method") if isinstance(source[1], dict) else None
+            if recorded in RETIRED_FILE_METHODS:
+                raise TranslatorError(
+                    f"{method} ({PATH_FLAGS[method]}): {file} is labelled {recorded!r}:"
+                    f" {RETIRED_FILE_METHODS[recorded]}"
+                )
             translator = translator_from_checkpoint(source, file)
             labels = check_labels(
                 source[1],
@@ -198,11 +231,16 @@ def load_translator(method: str, cfg) -> tuple[TranslatorMethod | None, str]:
             ) from err
         except UnlabelledTranslatorError as err:
             raise TranslatorError(f"{method}: {err}") from err
+        except TranslatorError:
+            raise
         except Exception as err:  # noqa: BLE001  (any failure to load is this error)
             raise TranslatorError(
                 f"{method}: {file} does not load ({type(err).__name__}: {err})"
             ) from err
         hashes.add(labels.get("model_hash"))
+        loaded_files.append(file)
+        started_from = source[1].get("started_from")
+        file_labels.append(labels | ({"started_from": started_from} if started_from else {}))
         return translator
 
     obj = checked(path)
@@ -214,7 +252,10 @@ def load_translator(method: str, cfg) -> tuple[TranslatorMethod | None, str]:
         if all(f.exists() for f in files.values()):
             seeds = {s: checked(f) for s, f in files.items()}
             why = f"loaded, trained seeds {list(cfg.seeds)}"
-    return TranslatorMethod(method, obj, seeds, frozenset(hashes - {None})), why
+    model_hashes = frozenset(hashes - {None})
+    return TranslatorMethod(
+        method, obj, seeds, model_hashes, tuple(loaded_files), tuple(file_labels)
+    ), why
 
 
 def check_translator_arms(translators: dict, arm) -> None:

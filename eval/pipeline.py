@@ -25,6 +25,7 @@ import numpy as np
 import mjx_arm  # (before jax: sets the XLA CPU flag)
 from eval.methods import (
     DEFAULT_METHODS,
+    METHOD_NAMES,
     METHODS,
     TRANSLATOR_METHODS,
     TranslatorMethod,
@@ -55,21 +56,19 @@ RESULTS_DIR = "results"
 #: RUNS_DIR/quick-<time> for --quick, RUNS_DIR/custom-<time> otherwise, never results/.
 RUNS_DIR = "runs"
 #: What the report says of the arm at constants.TRANSLATOR_MODEL_PATH (the default model,
-#: constants.DEFAULT_MODEL_PATH).
-ARM_NOTE = (
-    "the I-Support arm under the paper's Cosserat law (the default model), on which the"
-    " committed translators (results/paper/rerun_2026-11-27/run/) were trained"
-)
+#: constants.DEFAULT_MODEL_PATH); which translators were scored on it is added from the files
+#: loaded (`translators_note`), never from a constant that a later run would outdate.
+ARM_NOTE = "the I-Support arm under the paper's Cosserat law (the default model)"
 #: What the report says of the arm at constants.LINEAR_LAW_MODEL_PATH.
 LINEAR_ARM_NOTE = (
     "the previous I-Support arm, fitted to the rod without stretch factors (the linear law),"
     " whose translators are in results/paper/run/ (give them with --ccgan-path, --wcgan-path,"
-    " --ccgan-sim-path)"
+    " --distilled-path)"
 )
 #: What the report says of the arm at constants.SOLID_MODEL_PATH.
 SOLID_ARM_NOTE = (
     "the earlier solid-disc arm, whose translators are in results/solid/translators/ (give them"
-    " with --ccgan-path, --wcgan-path, --ccgan-sim-path)"
+    " with --ccgan-path, --wcgan-path, --distilled-path)"
 )
 
 
@@ -139,7 +138,8 @@ class EvalConfig:
     wcgan_path: str | None = None
     """Checkpoint of the WCGAN-GP baseline (None: WCGAN_DEFAULT_PATH)."""
     ccgan_sim_path: str | None = None
-    """Checkpoint of the simulator-fine-tuned CCGAN-GP (None: CCGAN_SIM_DEFAULT_PATH)."""
+    """Checkpoint of the distilled translator, labelled "distill" (None:
+    CCGAN_SIM_DEFAULT_PATH)."""
     trust_unlabelled_translators: bool = False
     """Score translator files that do not record their method, domains and arm (the solid-disc
     arm's, results/solid/translators/); labelled files are always checked."""
@@ -191,6 +191,12 @@ class EvalConfig:
         for field in ("ccgan_path", "wcgan_path", "ccgan_sim_path"):
             _check_file(field, getattr(self, field))
         require(isinstance(self.oracle, OracleConfig), "oracle", "must be an OracleConfig")
+        require(
+            self.oracle.held or "oracle" in self.methods,
+            "oracle.held",
+            "(a command per control period) sets the oracle, which is not among the methods: add"
+            " oracle to --methods or leave the flag out",
+        )
 
 
 def quick(cfg: EvalConfig) -> EvalConfig:
@@ -285,16 +291,43 @@ def output_dir(cfg: EvalConfig) -> Path:
     raise FileExistsError(f"no free run folder {stem}-<n> under {RUNS_DIR}")
 
 
-def model_description(cfg: EvalConfig) -> dict:
-    """{"file": the arm's MJCF (relative to the repository when inside it), "note": what it is}
-    for shapes.json and shapes.md."""
-    if cfg.xml is not None:
-        return {"file": "MJCF text (EvalConfig.xml)", "note": "a custom arm"}
-    path = Path(cfg.model_path).resolve()
+def _shown_path(path: Path) -> str:
+    """`path` relative to the repository when inside it, else absolute."""
+    path = Path(path).resolve()
     try:
-        name = str(path.relative_to(constants.ROOT))
+        return str(path.relative_to(constants.ROOT))
     except ValueError:
-        name = str(path)
+        return str(path)
+
+
+def translators_note(translators: dict[str, TranslatorMethod]) -> str:
+    """Which translator files were scored, read from the files loaded: each method's checkpoint
+    (and its per-seed files beside it), and whether their labels record the arm they were
+    trained on. Empty without translators."""
+    parts = []
+    for method, tr in translators.items():
+        files = [_shown_path(f) for f in tr.files]
+        shown = files[0] if len(files) == 1 else f"{files[0]} and {', '.join(files[1:])}"
+        parts.append(f"{METHOD_NAMES.get(method, method)} from {shown}")
+    if not parts:
+        return ""
+    labelled = all(tr.model_hashes for tr in translators.values())
+    trained = "trained on this arm, as their labels record" if labelled else "not all labelled"
+    return f"translators scored ({trained}): " + "; ".join(parts)
+
+
+def model_description(cfg: EvalConfig, translators: dict | None = None) -> dict:
+    """{"file": the arm's MJCF (relative to the repository when inside it), "note": what it is,
+    and which translator files were scored on it (`translators_note`)} for shapes.json and
+    shapes.md."""
+    scored = translators_note(translators or {})
+    if cfg.xml is not None:
+        return {
+            "file": "MJCF text (EvalConfig.xml)",
+            "note": "; ".join(filter(None, ["a custom arm", scored])),
+        }
+    path = Path(cfg.model_path).resolve()
+    name = _shown_path(path)
     notes = {
         constants.TRANSLATOR_MODEL_PATH.resolve(): ARM_NOTE,
         constants.LINEAR_LAW_MODEL_PATH.resolve(): LINEAR_ARM_NOTE,
@@ -302,7 +335,7 @@ def model_description(cfg: EvalConfig) -> dict:
     }
     translators_arm = constants.TRANSLATOR_MODEL_PATH.relative_to(constants.ROOT)
     other = f"not the arm the committed translators were trained on ({translators_arm})"
-    return {"file": name, "note": notes.get(path, other)}
+    return {"file": name, "note": "; ".join(filter(None, [notes.get(path, other), scored]))}
 
 
 def machine_description() -> str:
@@ -397,9 +430,10 @@ def _load(cfg: EvalConfig, run: RunLog) -> tuple:
                 f"{sorted(tr.trained_seeds)}; its ± spans training seeds."
             )
     run.timings["translators_s"] = time.perf_counter() - t0
-    model = model_description(cfg)
-    if translators and model["note"] != ARM_NOTE and cfg.xml is None:
-        run.note(f"the arm {model['file']} is {model['note']}.")
+    model = model_description(cfg, translators)
+    default_arm = Path(cfg.model_path).resolve() == constants.TRANSLATOR_MODEL_PATH.resolve()
+    if translators and not default_arm and cfg.xml is None:
+        run.note(f"the arm {model['file']} is {model_description(cfg)['note']}.")
     t0 = time.perf_counter()
     arm_s, arm_c = load_arms(cfg)
     run.timings["load_s"] = time.perf_counter() - t0

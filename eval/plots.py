@@ -10,6 +10,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
+from eval.methods import METHOD_NAMES  # noqa: E402
 from mjx_arm.constants import CONTROL_HZ  # noqa: E402
 
 CM = 100.0
@@ -28,7 +29,7 @@ LABELS = {
     "none": "untranslated",
     "stretch": "stretch",
     "ccgan": "CCGAN-GP",
-    "ccgan_sim": "CCGAN-GP + sim",
+    "ccgan_sim": METHOD_NAMES["ccgan_sim"],
     "wcgan": "WCGAN-GP",
     "mpc": "MPC (D_c sim)",
     "oracle": "oracle",

@@ -8,6 +8,8 @@ the oracle's settings) and render as they did. Errors are X_err (cm) and phi_err
 
 from __future__ import annotations
 
+from eval.methods import METHOD_NAMES
+
 #: The paper's Table I: {shape: {method: (X_err cm, phi_err rad)}}, scored through its F_c.
 PAPER_TABLE_I = {
     "circle": {"ccgan": (2.98, 0.276), "wcgan": (7.14, 0.636)},
@@ -60,19 +62,8 @@ def _pair_table(caption: str, table: dict, methods: list, keys: tuple[str, str],
     return lines
 
 
-METHOD_NAMES = {
-    "none": "untranslated",
-    "stretch": "stretch only",
-    "ccgan": "CCGAN-GP",
-    "ccgan_sim": "CCGAN-GP refined in the simulator",
-    "wcgan": "WCGAN-GP",
-    "mpc": "MPC in the D_c simulator",
-    "oracle": "the oracle",
-}
-
-
 #: Each learned translator and the methods its findings compare it with: the baseline WCGAN-GP
-#: only against the simple methods, CCGAN-GP against its fine-tuned version once (from that side).
+#: only against the simple methods, CCGAN-GP against its distilled version once (from that side).
 FINDINGS_BASES = {
     "ccgan": ("none", "stretch", "wcgan", "mpc"),
     "ccgan_sim": ("none", "stretch", "ccgan", "wcgan", "mpc"),

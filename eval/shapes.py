@@ -24,6 +24,8 @@ from ccgan.translator import DEFAULT_PATH, LINEAR_TRANSLATORS_DIR, TRANSLATORS_D
 from eval.methods import (
     CCGAN_SIM_DEFAULT_PATH,
     DEFAULT_METHODS,
+    METHOD_ALIASES,
+    METHOD_NAMES,
     METHODS,
     PATH_FLAGS,
     WCGAN_DEFAULT_PATH,
@@ -114,6 +116,7 @@ FLAGS = {
     "oracle.init": "--oracle-init",
     "oracle.horizon_s": "--oracle-horizon",
     "oracle.substeps": "--oracle-substeps",
+    "oracle.held": "--oracle-per-period",
 }
 
 
@@ -154,9 +157,9 @@ def _add_run_options(p: argparse.ArgumentParser) -> None:
         "--methods",
         nargs="+",
         default=None,
-        choices=list(METHODS),
+        choices=[*METHODS, *METHOD_ALIASES],
         metavar="METHOD",
-        help=f"methods to score, of {', '.join(METHODS)} (default: "
+        help=f"methods to score, of {', '.join(METHODS)} ({_aliases_help()}; default: "
         + " ".join(DEFAULT_METHODS)
         + ", less the oracle and WCGAN-GP on"
         " a CPU)",
@@ -223,7 +226,7 @@ def _add_run_options(p: argparse.ArgumentParser) -> None:
         metavar="METHOD",
         default=list(EvalConfig.robust_methods),
         help="methods of the noise and periodicity tests, where run (of stretch and the"
-        " translators; stretch and ccgan_sim each add minutes on 2 cores)",
+        " translators; stretch and the distilled translator each add minutes on 2 cores)",
     )
     p.add_argument(
         "--noise-stds",
@@ -235,6 +238,20 @@ def _add_run_options(p: argparse.ArgumentParser) -> None:
         f" {' '.join(map(str, EvalConfig.noise_stds))}, on a CPU"
         f" {' '.join(map(str, CPU_NOISE_STDS))})",
     )
+
+
+def _aliases_help() -> str:
+    """ "ccgan_sim is the distilled translator, also named distilled" for the help."""
+    return "; ".join(
+        f"{key} is the {METHOD_NAMES[key]} translator, also named {alias}"
+        for alias, key in METHOD_ALIASES.items()
+    )
+
+
+def _method_keys(names: list[str]) -> list[str]:
+    """Method names as given on the command line -> their keys (`METHOD_ALIASES`), in order (a
+    repeated one stays repeated, for EvalConfig to refuse)."""
+    return [METHOD_ALIASES.get(n, n) for n in names]
 
 
 def _shown(path: Path) -> str:
@@ -260,7 +277,7 @@ def _add_arm_options(p: argparse.ArgumentParser) -> None:
         choices=["constrained", "aged"],
         help="D_c: the paper's viscous medium, or the aged arm (stiffness x0.7, same medium);"
         " the default translators translate into the medium and are refused for aged: give the"
-        f" aged pair's (e.g. --ccgan-sim-path {_shown(TRANSLATORS_DIR)}"
+        f" aged pair's (e.g. --distilled-path {_shown(TRANSLATORS_DIR)}"
         "/aged_sim/translator.ckpt) or leave them out with --methods",
     )
     p.add_argument(
@@ -278,10 +295,12 @@ def _add_arm_options(p: argparse.ArgumentParser) -> None:
         " if absent)",
     )
     p.add_argument(
+        "--distilled-path",
         "--ccgan-sim-path",
+        dest="distilled_path",
         metavar="CKPT",
         default=None,
-        help="fine-tuned CCGAN-GP checkpoint"
+        help="distilled translator checkpoint (ccgan.distill; its file labelled 'distill')"
         f" (default: {_shown(CCGAN_SIM_DEFAULT_PATH)}, skipped if absent)",
     )
     p.add_argument(
@@ -347,7 +366,7 @@ def parse_args(argv: list[str] | None = None) -> EvalConfig:
             run_folder.check_writable_folder(a.out)
         except OSError as err:
             p.error(f"--out: {err}")
-    methods = default_methods() if a.methods is None else a.methods
+    methods = default_methods() if a.methods is None else _method_keys(a.methods)
     noise_stds = default_noise_stds() if a.noise_stds is None else a.noise_stds
     horizon = None if a.oracle_horizon is not None and a.oracle_horizon <= 0 else a.oracle_horizon
     try:
@@ -360,13 +379,13 @@ def parse_args(argv: list[str] | None = None) -> EvalConfig:
             hold_factors=tuple(a.hold_factors),
             render=a.render,
             robustness=not a.no_robustness,
-            robust_methods=tuple(a.robust_methods),
+            robust_methods=tuple(_method_keys(a.robust_methods)),
             noise_stds=tuple(noise_stds),
             out_dir=a.out,
             model_path=a.model,
             ccgan_path=a.ccgan_path,
             wcgan_path=a.wcgan_path,
-            ccgan_sim_path=a.ccgan_sim_path,
+            ccgan_sim_path=a.distilled_path,
             trust_unlabelled_translators=a.trust_unlabelled_translators,
             target_domain=a.target_domain,
             oracle=OracleConfig(
@@ -381,6 +400,8 @@ def parse_args(argv: list[str] | None = None) -> EvalConfig:
         cfg = quick(cfg) if a.quick else cfg
     except ConfigError as err:
         p.error(f"{FLAGS.get(err.field, err.field)} {err.problem}")
+    if a.out is None:
+        _check_default_folder(p, cfg)
     if a.methods is None and "oracle" not in methods:
         print(
             "NOTE: the oracle and WCGAN-GP are left out by default on CPU (the oracle's MJX"
@@ -388,6 +409,19 @@ def parse_args(argv: list[str] | None = None) -> EvalConfig:
             " --methods ... oracle wcgan."
         )
     return cfg
+
+
+def _check_default_folder(p: argparse.ArgumentParser, cfg: EvalConfig) -> None:
+    """Without --out a run writes under the working directory (results/ for the main job, else
+    a new folder under runs/): refuse, before any work, one that cannot be written there."""
+    folder = RESULTS_DIR if is_main_job(cfg) else RUNS_DIR
+    try:
+        run_folder.check_writable_folder(folder)
+    except OSError as err:
+        p.error(
+            f"no --out, so this run writes {folder}/ in the working directory {Path.cwd()}:"
+            f" {err}; give --out DIR"
+        )
 
 
 def main(argv: list[str] | None = None) -> dict:

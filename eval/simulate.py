@@ -25,7 +25,7 @@ from eval.methods import (
     method_commands,
     method_seeds,
 )
-from mjx_arm import programs
+from mjx_arm import compile_notice, programs
 from tracking import metrics, mpc
 from tracking import oracle as oracle_lib
 from tracking.held import every_kth, rollout_grouped
@@ -173,6 +173,13 @@ def start_oracle(plan: Plan, run: RunLog) -> _InThread | None:
     )
     if cfg.oracle.init == "mpc":
         run.timings["oracle_init_s"] = time.perf_counter() - t0
+    if cfg.oracle.steps > 0:  # its gradient compiles silently for minutes on a CPU
+        compile_notice.announce_compile(
+            ("eval.oracle", oracle_targets.shape, plan.k_stretch),
+            len(shapes),
+            plan.horizon * plan.k_stretch,
+            what="the oracle's gradient through the MJX rollout",
+        )
     return _InThread(
         oracle_lib.oracle_commands,
         plan.arm_c,

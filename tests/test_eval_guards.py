@@ -164,7 +164,10 @@ def test_figures_of_a_quick_run_carry_the_mark(tmp_path):
         (["--model", "nope.xml"], "--model", "names no file"),
         (["--ccgan-path", "nope.ckpt"], "--ccgan-path", "names no file"),
         (["--wcgan-path", "nope.ckpt"], "--wcgan-path", "names no file"),
-        (["--ccgan-sim-path", "nope.ckpt"], "--ccgan-sim-path", "names no file"),
+        (["--distilled-path", "nope.ckpt"], "--distilled-path", "names no file"),
+        # The old name of --distilled-path is still accepted.
+        (["--ccgan-sim-path", "nope.ckpt"], "--distilled-path", "names no file"),
+        (["--methods", "none", "--oracle-per-period"], "--oracle-per-period", "add oracle"),
         (["--oracle-steps", "0"], "--oracle-steps", ">= 1, got 0"),
         (["--oracle-lr", "-1"], "--oracle-lr", "> 0"),
         (["--oracle-horizon", "nan"], "--oracle-horizon", "at least one 0.1 s command"),
@@ -272,7 +275,7 @@ def test_missing_default_translators_are_skipped_with_a_note(tmp_path, monkeypat
     cfg = pipeline.EvalConfig()
     for method, flag in (
         ("ccgan", "--ccgan-path"),
-        ("ccgan_sim", "--ccgan-sim-path"),
+        ("ccgan_sim", "--distilled-path"),
         ("wcgan", "--wcgan-path"),
     ):
         tr, why = methods.load_translator(method, cfg)
@@ -350,9 +353,10 @@ def test_default_arm_is_the_isupport_one_and_model_path_is_used(small_xml, tmp_p
     assert pipeline.EvalConfig().model_path == str(constants.DEFAULT_MODEL_PATH)
     assert shapes.parse_args([]).model_path == str(constants.DEFAULT_MODEL_PATH)
     described = pipeline.model_description(pipeline.EvalConfig())
-    assert described["file"] == "models/softarm.xml" and described["note"] == pipeline.ARM_NOTE
-    assert "paper's Cosserat law" in described["note"]
-    assert "results/paper/rerun_2026-11-27/run/" in described["note"]
+    assert described == {
+        "file": "models/softarm.xml",
+        "note": "the I-Support arm under the paper's Cosserat law (the default model)",
+    }
     linear = pipeline.model_description(
         pipeline.EvalConfig(model_path=str(constants.LINEAR_LAW_MODEL_PATH))
     )
@@ -454,6 +458,88 @@ def test_translators_labelled_for_another_method_or_domain_are_refused(
     assert method in pipeline.evaluate(cfg, command="test", log=lambda *_: None)["methods_run"]
 
 
+def _labelled_copy(tmp_path, name, method, **extra):
+    """A copy of the shipped translator labelled as made by `method` for D_c on an arm of hash
+    "0" * 16, with `extra` metadata (a distillation's "started_from")."""
+    from ccgan import checkpoint
+
+    tree, meta = checkpoint.load(SHIPPED)
+    labels = _labels(method, "constrained", "0" * 16)
+    checkpoint.save(tmp_path / name, tree, meta | labels | extra)
+    return tmp_path / name
+
+
+def test_a_translator_distilled_from_another_start_or_fine_tuned_is_refused_as_distilled(
+    tmp_path, monkeypatch
+):
+    """The distilled translator is the CCGAN-GP one (labelled "distill"): a file distilled from
+    the WCGAN-GP ("distill_from_wcgan") is refused with one line naming its label, and a file
+    of the retired ccgan.finetune with one saying it was retired; the right label loads and its
+    start is kept for the report."""
+    monkeypatch.delenv("CCGAN_TRANSLATOR", raising=False)
+    start = {"method": "wcgan", "path": "w/translator.ckpt", "sha256": "ab" * 32}
+    wrong = _labelled_copy(tmp_path, "w.ckpt", "distill_from_wcgan", started_from=start)
+    with pytest.raises(methods.TranslatorError) as exc:
+        methods.load_translator("ccgan_sim", pipeline.EvalConfig(ccgan_sim_path=str(wrong)))
+    message = str(exc.value)
+    assert "\n" not in message and "w.ckpt" in message and "--distilled-path" in message
+    assert "the file has 'distill_from_wcgan'" in message and "expects method 'distill'" in message
+    retired = _labelled_copy(tmp_path, "f.ckpt", "finetune")
+    with pytest.raises(methods.TranslatorError) as exc:
+        methods.load_translator("ccgan_sim", pipeline.EvalConfig(ccgan_sim_path=str(retired)))
+    assert "'finetune'" in str(exc.value) and "retired" in str(exc.value)
+    right = _labelled_copy(tmp_path, "d.ckpt", "distill", started_from=start | {"method": "ccgan"})
+    tr, _ = methods.load_translator("ccgan_sim", pipeline.EvalConfig(ccgan_sim_path=str(right)))
+    assert tr.files == (right,) and tr.labels[0]["method"] == "distill"
+    assert tr.labels[0]["started_from"]["method"] == "ccgan"
+
+
+def test_the_arm_note_names_the_translator_files_loaded_not_a_constant(tmp_path, monkeypatch):
+    """shapes.json's arm note says which files were scored, from the translators loaded: a
+    file outside the committed run is named as it is, never as the committed run."""
+    monkeypatch.delenv("CCGAN_TRANSLATOR", raising=False)
+    path = _labelled_copy(tmp_path, "c.ckpt", "ccgan")
+    cfg = pipeline.EvalConfig(ccgan_path=str(path))
+    tr, _ = methods.load_translator("ccgan", cfg)
+    note = pipeline.model_description(cfg, {"ccgan": tr})["note"]
+    assert note.startswith(pipeline.ARM_NOTE + "; translators scored")
+    assert f"CCGAN-GP from {path}" in note and "as their labels record" in note
+    assert "rerun_2026" not in note
+    unlabelled = methods.TranslatorMethod("ccgan_sim", tr._obj, files=(path,))
+    note = pipeline.model_description(cfg, {"ccgan_sim": unlabelled})["note"]
+    assert f"distilled from {path}" in note and "not all labelled" in note
+
+
+def test_a_read_only_working_directory_without_out_is_a_usage_error(in_tmp, capsys, monkeypatch):
+    """Without --out the run writes runs/ (or results/) in the working directory: one that
+    cannot be written there is refused in one line before any work, not an OSError later."""
+    unwritable = in_tmp.resolve()
+    real_access = os.access
+    monkeypatch.setattr(
+        os, "access", lambda p, mode: Path(p).resolve() != unwritable and real_access(p, mode)
+    )
+    for argv in (["--quick"], []):
+        with pytest.raises(SystemExit) as exc:
+            shapes.parse_args(argv)
+        assert exc.value.code == 2
+        err = capsys.readouterr().err
+        assert f"cannot write in {unwritable}" in err or "cannot write in ." in err, err
+        assert "give --out DIR" in err
+    assert list(in_tmp.iterdir()) == []
+    assert shapes.parse_args(["--quick", "--out", str(in_tmp.parent / "elsewhere")]).quick
+
+
+def test_the_distilled_translator_has_one_name(in_tmp):
+    """ "distilled" in tables, plots and videos, and accepted by --methods; its key stays
+    ccgan_sim, as the committed shapes.json files and stage folders have it."""
+    assert methods.METHOD_NAMES["ccgan_sim"] == "distilled" == plots.LABELS["ccgan_sim"]
+    assert report.METHOD_NAMES is methods.METHOD_NAMES
+    cfg = shapes.parse_args(["--methods", "none", "distilled", "--robust-methods", "distilled"])
+    assert cfg.methods == ("none", "ccgan_sim") and cfg.robust_methods == ("ccgan_sim",)
+    help_text = shapes.build_parser().format_help()
+    assert "--distilled-path" in help_text and "CCGAN-GP + sim" not in help_text
+
+
 def test_unlabelled_translators_need_the_trust_flag(small_xml, tmp_path, monkeypatch):
     """The solid-disc arm's files record no labels: refused (here on the small arm, and from the
     command line on the I-Support arm) unless --trust-unlabelled-translators is given."""
@@ -518,7 +604,7 @@ def test_default_translators_are_refused_for_the_aged_arm(in_tmp):
     argv = ["--target-domain", "aged", "--methods", "none", "ccgan_sim", "--shapes", "circle"]
     with pytest.raises(SystemExit) as exc:
         shapes.main([*argv, "--duration", "0.5", "--no-robustness", "--out", "out"])
-    assert "--ccgan-sim-path" in str(exc.value.code) and not Path("out").exists()
+    assert "--distilled-path" in str(exc.value.code) and not Path("out").exists()
 
 
 def test_the_robustness_tests_leave_out_the_distilled_translator_unless_asked(in_tmp):
