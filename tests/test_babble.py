@@ -519,15 +519,26 @@ def _assert_same(back, d):
         (["--n", "0", "--n-val", "0"], "not both 0"),
         (["--hold-min", "2", "--hold-max", "1"], "hold_min_s <= hold_max_s"),
         (["--model", "no/such.xml"], "no such MJCF file"),
+        (["--model", "{npz}"], "--model .*data.npz: .*(not an MJCF text file|does not parse)"),
+        (["--model", "{negative}"], "--model .*negative.xml: .*timestep -0.004 s must be positive"),
+        (["--distributed"], "--distributed needs a coordinator"),
         (["--out", "{file}"], "exists and is not a folder"),
         (["--out", "{busy}"], "notes.txt"),
     ],
 )
-def test_cli_refuses_bad_options_before_simulating(argv, message, tmp_path, monkeypatch, capsys):
+def test_cli_refuses_bad_options_before_simulating(
+    argv, message, tmp_path, monkeypatch, capsys, xml
+):
     (tmp_path / "file").write_text("mine")
     (tmp_path / "busy").mkdir()
     (tmp_path / "busy" / "notes.txt").write_text("mine too")
-    argv = [a.format(file=tmp_path / "file", busy=tmp_path / "busy") for a in argv]
+    np.savez(tmp_path / "data.npz", poses=np.zeros((2, 3)))
+    (tmp_path / "negative.xml").write_text(xml.replace('timestep="0.004"', 'timestep="-0.004"'))
+    for name in babble_cli.COORDINATOR_ENV:
+        monkeypatch.delenv(name, raising=False)
+    paths = {k: tmp_path / v for k, v in [("file", "file"), ("busy", "busy"), ("npz", "data.npz")]}
+    argv = [a.format(negative=tmp_path / "negative.xml", **paths) for a in argv]
+    monkeypatch.setattr(babble.arm_lib, "load", lambda *a, **k: pytest.fail("loaded an arm"))
     monkeypatch.setattr(babble, "babble", lambda *a, **k: pytest.fail("simulated first"))
     with pytest.raises(SystemExit) as exit_:
         babble_cli.main(argv)

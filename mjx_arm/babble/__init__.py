@@ -171,18 +171,57 @@ class NotEnoughMemoryError(ValueError):
     """A babbling run would not fit the machine's available memory (`check_memory`)."""
 
 
-def memory_estimate_bytes(config: BabbleConfig) -> int:
+def memory_estimate_bytes(config: BabbleConfig, backend: str | None = None) -> int:
     """Host memory a run of `config` needs at its peak (bytes), before any work.
 
     Every (domain, split) dataset is kept until the end ([n, T, 3] programs and [n, T, 6] poses,
-    float32); the largest split's arrays once more while they are made and written; one MuJoCo
-    C chunk (`C_BYTES_PER_TRAJECTORY`) or, with MJX, one chunk's poses brought to the host.
+    float32); the largest split's arrays once more while they are made and written; and what one
+    chunk holds in flight, which depends on the backend: MuJoCo C simulates at most
+    `C_MAX_CHUNK` trajectories per call, each holding its substep states
+    (`C_BYTES_PER_TRAJECTORY`), whatever `config.chunk` is; MJX holds one chunk's programs and
+    poses on the host (its states stay on the device).
+
+    Args:
+      config: the run.
+      backend: "c", "mjx" or "auto" (the larger of the two, without asking JAX for its
+        backend, which a multi-process run must not do before `jax.distributed.initialize`);
+        None: `config.backend`.
     """
+    backend = config.backend if backend is None else backend
+    if backend == "auto":
+        return max(memory_estimate_bytes(config, b) for b in ("c", "mjx"))
+    if backend not in ("c", "mjx"):
+        raise ValueError(f"backend must be one of {BACKENDS}, got {backend!r}")
     per_trajectory = config.n_steps * (3 + arm_lib.POSE_DIM) * 4
     splits = config.splits()
     kept = len(config.domains) * sum(splits.values()) * per_trajectory
     chunk = min(config.chunk, max(splits.values()))
-    return int(kept + max(splits.values()) * per_trajectory + chunk * C_BYTES_PER_TRAJECTORY)
+    if backend == "c":
+        in_flight = min(chunk, C_MAX_CHUNK) * C_BYTES_PER_TRAJECTORY
+    else:
+        in_flight = chunk * per_trajectory
+    return int(kept + max(splits.values()) * per_trajectory + in_flight)
+
+
+def largest_n_train(config: BabbleConfig, budget_bytes: float, backend: str | None = None) -> int:
+    """The most training trajectories per domain (--n) that keep `config`'s
+    `memory_estimate_bytes` within `budget_bytes`, its other fields unchanged; 0 if none does."""
+
+    def fits(n: int) -> bool:
+        return (
+            memory_estimate_bytes(dataclasses.replace(config, n_train=n), backend) <= budget_bytes
+        )
+
+    if not fits(1):
+        return 0
+    low, high = 1, max(config.n_train, 1)
+    while low < high:  # the estimate grows with n: the largest n that fits, by bisection
+        mid = (low + high + 1) // 2
+        if fits(mid):
+            low = mid
+        else:
+            high = mid - 1
+    return low
 
 
 def available_memory_bytes() -> int | None:
@@ -215,15 +254,21 @@ def check_memory(config: BabbleConfig, available: int | None = None) -> int:
     need = memory_estimate_bytes(config)
     available = available_memory_bytes() if available is None else available
     if available is not None and need > MEMORY_FRACTION * available:
-        per = need / max(1, len(config.domains) * sum(config.splits().values()))
-        fits = int(MEMORY_FRACTION * available / per)
+        budget = MEMORY_FRACTION * available
+        n_fit = largest_n_train(config, budget)
+        if n_fit > 0:
+            hint = (
+                f"--n {n_fit} (training trajectories per domain, with --n-val {config.n_val})"
+                " fits; babble fewer"
+            )
+        else:
+            hint = "not even --n 1 fits; babble"
         raise NotEnoughMemoryError(
             f"{len(config.domains)} domain(s) x {sum(config.splits().values())} trajectories of"
             f" {config.duration_s:g} s need about {need / 1e9:.3g} GB of memory, but"
             f" {available / 1e9:.3g} GB are available ({MEMORY_FRACTION:.0%} of it may be"
-            f" planned): about {fits // len(config.domains)} trajectories per domain fit; babble"
-            " fewer (--n, --n-val) or"
-            " shorter ones (--duration), or in several runs with other --seed values"
+            f" planned): {hint} or shorter ones (--duration), a smaller --chunk, or in several"
+            " runs with other --seed values"
         )
     return need
 

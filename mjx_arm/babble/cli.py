@@ -19,7 +19,7 @@ from pathlib import Path
 
 import jax
 
-from mjx_arm import dataset, domains, machine, run_folder
+from mjx_arm import checks, dataset, domains, machine, run_folder
 from mjx_arm.babble import (
     BACKENDS,
     C_MAX_CHUNK,
@@ -198,8 +198,11 @@ def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
         check_memory(args.config)
     except NotEnoughMemoryError as err:
         p.error(str(err))
-    if args.model is not None and not Path(args.model).is_file():
-        p.error(f"--model {args.model}: no such MJCF file")
+    if args.model is not None:
+        try:
+            check_model_file(args.model)
+        except (OSError, ValueError) as err:
+            p.error(f"--model {args.model}: {err}")
     try:
         dataset.check_output_folder(args.out)
     except OSError as err:
@@ -207,8 +210,40 @@ def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
     return args
 
 
+def check_model_file(path: str) -> None:
+    """Reads, compiles and checks the MJCF at `path` as `mjx_arm.load` will (no settling, no
+    simulation), so a bad model is refused before any work.
+
+    Raises:
+      FileNotFoundError: no file. ModelValidationError (a ValueError): not an MJCF text file
+        (e.g. an .npz dataset), does not compile, or lacks what the arm API needs (a timestep
+        that is not positive included), or its valve numerics are unusable.
+    """
+    if not Path(path).is_file():
+        raise FileNotFoundError("no such MJCF file")
+    mj_model, _, source, _ = checks.read_model(path, None)
+    checks.validate_model(mj_model, source)
+    checks.valve_params(mj_model, source)
+
+
+#: Variables from which `jax.distributed.initialize()` finds the coordinator by itself: JAX's
+#: own, and the cluster environments it detects (SLURM, Open MPI, MPICH/PMI).
+COORDINATOR_ENV = ("JAX_COORDINATOR_ADDRESS", "SLURM_JOB_ID", "OMPI_MCA_orte_hnp_uri", "PMI_RANK")
+
+
 def check_distributed_args(args: argparse.Namespace) -> None:
-    """Raises ValueError unless the multi-process options are consistent."""
+    """Raises ValueError unless the multi-process options are consistent (--distributed needs
+    a coordinator: --coordinator, or one that JAX finds in `COORDINATOR_ENV`)."""
+    if (
+        args.distributed
+        and args.coordinator is None
+        and not any(os.environ.get(name) for name in COORDINATOR_ENV)
+    ):
+        raise ValueError(
+            "--distributed needs a coordinator: give --coordinator HOST:PORT with"
+            " --num-processes and --process-id, or run under SLURM / Open MPI, or set"
+            " JAX_COORDINATOR_ADDRESS"
+        )
     given = [
         f"--{name.replace('_', '-')}"
         for name in ("coordinator", "num_processes", "process_id")
