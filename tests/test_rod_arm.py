@@ -142,3 +142,13 @@ def test_throughput_bench_writes_its_table(tmp_path):
     assert stored["command"].startswith("python -m bench.rod_throughput --out")
     table = (tmp_path / "rod_throughput.md").read_text()
     assert "| 1 | " in table and "| - | - | - |" in table  # no float32, no chain
+
+
+@pytest.mark.parametrize("difference, status", [(0.0, 0), (2e-6, 1)])
+def test_the_agreement_command_fails_above_1e_6_of_l(monkeypatch, capsys, difference, status):
+    row = {"programs": 3, "seconds": 60.0, "max_d3_difference": 0.0}
+    found = {"source": row | {"max_tip_fraction_of_L": 0.0}}
+    found["constrained"] = row | {"max_tip_fraction_of_L": difference}
+    monkeypatch.setattr(rod_arm, "agreement", lambda seconds: found)
+    assert rod_arm.main([]) == status
+    assert ("DOES NOT agree" in capsys.readouterr().out) == bool(status)
