@@ -7,6 +7,10 @@ training's `metrics.csv` (the held-out `val_error_cm` of each seed at its last e
 distillation's `distill.json` (each seed's best held-out X_err). Either folder may be a committed
 copy without the large files, since the hashes are in the manifests. Why: whether a second run
 of the same command reproduces the first is a question of the files, not of the test shapes.
+
+When the two runs' stages were run with other commands (a quick run beside a paper-scale one),
+a note under the table names each differing setting (`ccgan.checkpoint.differences` on the
+commands their manifests record), since their numbers then answer different questions.
 """
 
 from __future__ import annotations
@@ -16,24 +20,56 @@ import csv
 import json
 from pathlib import Path
 
+from ccgan.checkpoint import differences
 from mjx_arm.atomic import write_atomically
 from mjx_arm.run_folder import check_writable_folder
 
 
+class MetricError(ValueError):
+    """A stage's metrics.csv or distill.json without the held-out number this table shows, or
+    with one that is not a number."""
+
+
+def _number(value, where: str) -> float:
+    try:
+        return float(value)
+    except (TypeError, ValueError):
+        raise MetricError(f"{where}: {value!r} is not a number") from None
+
+
 def _held_out(folder: Path) -> tuple[str, list[float]] | None:
-    """(what the number is, one per seed) from a stage folder, or None when it has none."""
+    """(what the number is, one per seed) from a stage folder, or None when it has none.
+
+    Raises:
+      MetricError: the file lacks the columns or keys read here, or a value is not a number.
+    """
     metrics, distill = folder / "metrics.csv", folder / "distill.json"
     if metrics.exists():
         last: dict[str, dict] = {}
         with metrics.open() as f:
-            for row in csv.DictReader(f):
+            reader = csv.DictReader(f)
+            missing = {"seed", "epoch", "val_error_cm"} - set(reader.fieldnames or ())
+            if missing:
+                raise MetricError(f"{metrics} has no column {', '.join(sorted(missing))}")
+            for row in reader:
                 last[row["seed"]] = row
-        rows = [last[s] for s in sorted(last, key=int)]
+        rows = [last[s] for s in sorted(last, key=lambda s: _number(s, f"{metrics} seed"))]
         epoch = rows[0]["epoch"] if rows else "?"
-        return f"val_error_cm at epoch {epoch}", [float(r["val_error_cm"]) for r in rows]
+        where = f"{metrics} val_error_cm"
+        return f"val_error_cm at epoch {epoch}", [_number(r["val_error_cm"], where) for r in rows]
     if distill.exists():
-        history = json.loads(distill.read_text())["history"]
-        return "best_val_x_err_cm", [float(v) for v in history["best_val_x_err_cm"]]
+        try:
+            record = json.loads(distill.read_text())
+        except (OSError, UnicodeDecodeError, ValueError) as err:
+            raise MetricError(f"{distill} is not readable JSON: {err}") from err
+        history = record.get("history") if isinstance(record, dict) else None
+        values = history.get("best_val_x_err_cm") if isinstance(history, dict) else None
+        if not isinstance(values, list):
+            raise MetricError(
+                f'{distill} has no "history" with "best_val_x_err_cm" (one per seed): not the'
+                " record of a finished ccgan.distill"
+            )
+        return "best_val_x_err_cm", [_number(v, f"{distill} best_val_x_err_cm") for v in values]
     return None
 
 
@@ -51,6 +87,44 @@ def _files(path: Path) -> dict:
     if not isinstance(files, dict):
         raise ManifestError(f'{path} has no "files" (the sha256 of each output): not a manifest')
     return files
+
+
+def stage_settings(manifest_path: Path) -> dict:
+    """{"module": ..., "--flag": its value(s) joined by spaces, "args": leading positionals} of
+    the command a stage's manifest records (its key); empty when it records none."""
+    try:
+        key = json.loads(manifest_path.read_text()).get("key")
+    except (OSError, UnicodeDecodeError, ValueError, AttributeError):
+        return {}
+    if not isinstance(key, dict):
+        return {}
+    settings, flag = {"module": key.get("module")}, "args"
+    for token in key.get("args", []):
+        token = str(token)
+        if token.startswith("--"):
+            flag = token
+            settings.setdefault(flag, "")
+        else:
+            settings[flag] = f"{settings.get(flag, '')} {token}".strip()
+    return settings
+
+
+def config_differences(first: Path, second: Path, names: list[str]) -> list[str]:
+    """ "stage.--flag: first X, second Y" for every setting the two runs' stages ran with
+    differently."""
+    out = []
+    for name in names:
+        settings = [stage_settings(run / name / "stage.json") for run in (first, second)]
+        for line in differences(*settings, prefix=name):
+            for old, new in (
+                (": not stored, this run ", ": not in first, second "),
+                (", not in this run", ", not in second"),
+                (": stored ", ": first "),
+                (", this run ", ", second "),
+            ):
+                line = line.replace(old, new)
+            out.append(line)
+    return out
 
 
 def compare(first: Path, second: Path) -> list[str]:
@@ -78,6 +152,15 @@ def compare(first: Path, second: Path) -> list[str]:
             f"| {name} | {', '.join(same) or '-'} | {', '.join(differ) or '-'} | {what} |"
             f" {shown[0]} | {shown[1]} |"
         )
+    differing = config_differences(first, second, names)
+    if differing:
+        lines += [
+            "",
+            f"Note: the two runs' configs differ in {len(differing)} settings of their stages'"
+            " commands, so their numbers are not of the same settings:",
+            "",
+            *[f"- {line}" for line in differing],
+        ]
     return lines
 
 
@@ -103,7 +186,7 @@ def main(argv: list[str] | None = None) -> None:
             parser.error(f"--out: {err}")
     try:
         text = "\n".join(compare(args.first, args.second)) + "\n"
-    except ManifestError as err:
+    except (ManifestError, MetricError) as err:
         parser.error(str(err))
     print(text, end="")
     if args.out is not None:

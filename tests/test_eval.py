@@ -161,10 +161,18 @@ def test_default_translator_finds_its_trained_seeds(tmp_path, monkeypatch):
     trust = {"trust_unlabelled_translators": True}  # the solid-disc arm's files have no labels
     tr, why = methods.load_translator("ccgan", pipeline.EvalConfig(seeds=(0, 1), **trust))
     assert sorted(tr.trained_seeds) == [0, 1], why
+    # Without the variable, DEFAULT_PATH: its per-seed files are used only when there is one
+    # for every evaluation seed (here seed 2's is missing, then added).
+    import ccgan.translator
+
     monkeypatch.delenv("CCGAN_TRANSLATOR")
-    tr, _ = methods.load_translator("ccgan", pipeline.EvalConfig(seeds=(0, 1, 2), **trust))
-    committed = shipped.parent / "translator_seed2.ckpt"
-    assert bool(tr.trained_seeds) == committed.exists()
+    monkeypatch.setattr(ccgan.translator, "DEFAULT_PATH", tmp_path / "translator.ckpt")
+    three = pipeline.EvalConfig(seeds=(0, 1, 2), **trust)
+    tr, why = methods.load_translator("ccgan", three)
+    assert tr.trained_seeds == {} and why == "loaded"
+    shutil.copy(shipped, tmp_path / "translator_seed2.ckpt")
+    tr, why = methods.load_translator("ccgan", three)
+    assert sorted(tr.trained_seeds) == [0, 1, 2] and why == "loaded, trained seeds [0, 1, 2]"
 
 
 @pytest.mark.slow

@@ -343,7 +343,7 @@ def test_report_checks_each_target_shape_by_shape():
     assert "ratio translator / stretch 1.80-1.80" in lines[4]
     assert "1.5x the receding-horizon tracker over the whole program" in lines[5]
     assert lines[5].endswith("5 of 5 shapes: met")  # 0.9 <= 1.5 x 0.7
-    assert lines[6].startswith("- Aged arm: CCGAN-GP refined in the simulator at most 0.5x")
+    assert lines[6].startswith("- Aged arm: distilled at most 0.5x")
     assert lines[6].endswith("4 of 5 shapes: not met (missed on kite)")
     table = report.paper_lines(results)
     assert "| circle | 2.98 / 0.276 | 7.14 / 0.636 | 0.90 / 0.100 |" in "\n".join(table)
@@ -579,6 +579,64 @@ def test_compare_runs_names_equal_and_differing_outputs_and_each_seeds_held_out_
     with pytest.raises(SystemExit):
         compare_runs.main([str(tmp_path / "a"), str(tmp_path / "empty")])
     assert "no stage folder" in capsys.readouterr().err
+
+
+def _run_with_stage(run, name, args, files=None, **written):
+    """A run folder `run` holding stage `name` whose manifest records `args` as its command,
+    with `written` ({file name: text}) beside it."""
+    stage = run / name
+    stage.mkdir(parents=True)
+    key = {"module": "ccgan.distill", "args": args, "files": {}, "inputs": {}}
+    (stage / "stage.json").write_text(json.dumps({"files": files or {"a": "x"}, "key": key}))
+    for file, text in written.items():
+        (stage / file).write_text(text)
+
+
+def test_compare_runs_refuses_missing_or_non_numeric_metrics_in_one_line(tmp_path, capsys):
+    from experiments import compare_runs
+
+    good = {"history": {"best_val_x_err_cm": [0.4, 0.5]}}
+    _run_with_stage(tmp_path / "a", "ccgan_sim", ["--epochs", "1"], **{"distill.json": "{}"})
+    _run_with_stage(
+        tmp_path / "b", "ccgan_sim", ["--epochs", "1"], **{"distill.json": json.dumps(good)}
+    )
+    cases = {
+        "distill.json": ("{}", 'has no "history"'),
+        "metrics.csv": ("seed,epoch\n0,1\n", "has no column val_error_cm"),
+    }
+    for file, (text, reason) in cases.items():
+        for stale in ("distill.json", "metrics.csv"):
+            (tmp_path / "a" / "ccgan_sim" / stale).unlink(missing_ok=True)
+        (tmp_path / "a" / "ccgan_sim" / file).write_text(text)
+        with pytest.raises(SystemExit) as exc:
+            compare_runs.main([str(tmp_path / "a"), str(tmp_path / "b")])
+        err = capsys.readouterr().err
+        assert exc.value.code == 2 and reason in err and str(tmp_path / "a") in err, err
+    (tmp_path / "a" / "ccgan_sim" / "metrics.csv").write_text("seed,epoch,val_error_cm\n0,1,nan?\n")
+    with pytest.raises(SystemExit):
+        compare_runs.main([str(tmp_path / "a"), str(tmp_path / "b")])
+    assert "'nan?' is not a number" in capsys.readouterr().err
+
+
+def test_compare_runs_notes_the_settings_in_which_the_runs_differ(tmp_path, capsys):
+    """A quick run beside a paper-scale one: the note names each differing flag of each stage;
+    two runs of the same commands carry no note."""
+    from experiments import compare_runs
+
+    paper_args = ["--epochs", "1840", "--n-train", "120", "--seeds", "0", "1", "2"]
+    quick_args = ["--epochs", "1", "--n-train", "2", "--seeds", "0", "1", "--quick"]
+    _run_with_stage(tmp_path / "paper", "ccgan_sim", paper_args)
+    _run_with_stage(tmp_path / "quick", "ccgan_sim", quick_args)
+    _run_with_stage(tmp_path / "again", "ccgan_sim", paper_args)
+    lines = compare_runs.compare(tmp_path / "paper", tmp_path / "quick")
+    text = "\n".join(lines)
+    assert "the two runs' configs differ in 4 settings" in text
+    assert "- ccgan_sim.--epochs: first '1840', second '1'" in lines
+    assert "- ccgan_sim.--seeds: first '0 1 2', second '0 1'" in lines
+    assert "- ccgan_sim.--quick: not in first, second ''" in lines
+    assert "configs differ" not in "\n".join(
+        compare_runs.compare(tmp_path / "paper", tmp_path / "again")
+    )
 
 
 def paper_like(tmp_path, data_text="d"):
