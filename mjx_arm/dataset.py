@@ -37,7 +37,7 @@ from typing import Any
 
 import numpy as np
 
-from mjx_arm import atomic, constants
+from mjx_arm import atomic, constants, run_folder
 from mjx_arm.constants import N_CHAMBERS, POSE_DIM
 
 #: Bumped when the file layout changes.
@@ -524,6 +524,7 @@ def check_output_folder(out_dir: str | os.PathLike) -> Path:
         raise FileExistsError(f"{existing} is not a folder, so {out_dir} cannot be made")
     if not os.access(existing, os.W_OK | os.X_OK):
         raise PermissionError(f"cannot write in {existing}, so not {out_dir} either")
+    run_folder.check_writable_folder(existing)  # a read-only mount, even for root
     return out_dir
 
 

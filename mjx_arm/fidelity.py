@@ -41,7 +41,7 @@ import numpy as np
 from tqdm import tqdm
 
 import mjx_arm
-from mjx_arm import constants, cosserat, fidelity_report, valve
+from mjx_arm import constants, cosserat, fidelity_report, run_folder, valve
 from mjx_arm.arm import time_constant_63
 from mjx_arm.machine import cpu_model, usable_cores
 from mjx_arm.model_gen import ArmParams, generate_xml
@@ -448,8 +448,7 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     if args.elements < 2:
         parser.error("--elements must be >= 2")
-    if args.out.exists() and not args.out.is_dir():
-        parser.error(f"--out {args.out} is a file, not a folder")
+    run_folder.check_out(parser, "--out", args.out)
     results = run(args.elements)
     args.out.mkdir(parents=True, exist_ok=True)
     (args.out / "fidelity.json").write_text(json.dumps(results, indent=2, default=_jsonable))

@@ -45,7 +45,7 @@ import numpy as np
 from tqdm import tqdm
 
 import mjx_arm
-from mjx_arm import constants, cosserat, domains, fitted
+from mjx_arm import constants, cosserat, domains, fitted, run_folder
 from mjx_arm.arm import SimulationDivergedError
 from mjx_arm.machine import cpu_model
 from mjx_arm.model_gen import ArmParams, generate_xml
@@ -269,8 +269,11 @@ def main(argv: list[str] | None = None) -> int:
         parser.error("--max-iter must be >= 1")
     if args.out is None and not args.write_model:
         parser.error("say where the fit goes: --out FILE, --write-model, or both")
-    if args.out is not None and (args.out.is_dir() or not args.out.parent.is_dir()):
-        parser.error(f"--out {args.out} must be a file path in an existing folder")
+    if args.out is not None:
+        run_folder.check_out(parser, "--out", args.out, file=True)
+    if args.write_model:
+        for path in (fitted.FIT_PATHS["isupport"], constants.DEFAULT_MODEL_PATH):
+            run_folder.check_out(parser, "--write-model", path, file=True)
     t0 = time.perf_counter()
     print("reference rod data ...", flush=True)
     data = reference_data()
@@ -287,6 +290,7 @@ def main(argv: list[str] | None = None) -> int:
             f" d3 {1e3 * b['d3_mean_rad']:.1f} -> {1e3 * a['d3_mean_rad']:.1f} mrad"
         )
     if args.out is not None:
+        args.out.parent.mkdir(parents=True, exist_ok=True)
         tmp = args.out.with_name(args.out.name + ".tmp")
         tmp.write_text(json.dumps(result, indent=2) + "\n")
         tmp.replace(args.out)

@@ -24,7 +24,7 @@ import numbers
 import sys
 from pathlib import Path
 
-from mjx_arm import constants, fitted
+from mjx_arm import constants, fitted, run_folder
 from mjx_arm import section as sections
 
 
@@ -572,7 +572,9 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     if args.segments is not None and args.segments < 2:
         parser.error("--segments must be >= 2")
-    if args.out.is_dir():
+    if not args.check:
+        run_folder.check_out(parser, "--out", args.out, file=True)
+    elif args.out.is_dir():
         parser.error(f"--out {args.out} is a folder, not a file")
     params = ArmParams(section=args.section)
     if args.segments is not None:

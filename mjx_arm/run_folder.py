@@ -1,4 +1,4 @@
-"""One owner per run folder, and output folders checked before any work.
+"""One owner per run folder, and output folders and files checked before any work (`check_out`).
 
 A command that writes a run folder (`experiments.paper --out`, `ccgan.train --workdir`,
 `eval.shapes --out`, `mjx_arm.babble --out`) holds an exclusive `fcntl.flock` on a lock file
@@ -10,10 +10,12 @@ when its holder ends normally, and a killed holder's empty file is reused.
 
 from __future__ import annotations
 
+import argparse
 import atexit
 import contextlib
 import fcntl
 import os
+import tempfile
 from pathlib import Path
 
 LOCK_NAME = ".lock"  # inside the folder it guards (`lock_path`)
@@ -131,7 +133,41 @@ def check_writable_folder(folder: str | os.PathLike) -> Path:
     if not existing.is_dir():
         way = "" if existing == folder else f", so {folder} cannot be made"
         raise NotADirectoryError(f"{existing} exists and is not a folder{way}")
+    way = "" if existing == folder else f", so {folder} cannot be made"
     if not os.access(existing, os.W_OK | os.X_OK):
-        way = "" if existing == folder else f", so {folder} cannot be made"
         raise PermissionError(f"cannot write in {existing}{way}")
+    try:  # a read-only mount, or a folder only root's permission bits would let through
+        with tempfile.TemporaryFile(dir=existing):
+            pass
+    except OSError as err:
+        raise PermissionError(f"cannot write in {existing}{way} ({err.strerror})") from None
     return folder
+
+
+def check_writable_file(path: str | os.PathLike) -> Path:
+    """Checks, before any work, that a command can write the file `path`: not an existing
+    folder, and its folder writable or creatable (`check_writable_folder`).
+
+    Raises:
+      IsADirectoryError: `path` is a folder. NotADirectoryError, PermissionError: as
+      `check_writable_folder` for its folder.
+    """
+    path = Path(path)
+    if path.is_dir():
+        raise IsADirectoryError(f"{path} is a folder; a file path is needed")
+    check_writable_folder(path.parent)
+    return path
+
+
+def check_out(parser: argparse.ArgumentParser, flag: str, path, file: bool = False) -> Path:
+    """A command's output check, before any work: an argparse usage error (exit 2) naming
+    `flag` unless `path` is a folder it can write or make (`file`: a file it can write,
+    `check_writable_file`).
+
+    Returns:
+      `path` as a Path.
+    """
+    try:
+        return check_writable_file(path) if file else check_writable_folder(path)
+    except OSError as err:
+        parser.error(f"{flag} {path}: {err}")

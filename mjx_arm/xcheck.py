@@ -37,7 +37,7 @@ from pathlib import Path
 import numpy as np
 from tqdm import tqdm
 
-from mjx_arm import atomic, constants, cosserat, valve
+from mjx_arm import atomic, constants, cosserat, run_folder, valve
 from mjx_arm.arm import time_constant_63
 from mjx_arm.machine import cpu_model
 from mjx_arm.programs import held_program
@@ -498,8 +498,7 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     if not (math.isfinite(args.seconds) and args.seconds >= 1.0):
         parser.error("--seconds must be a finite number >= 1")
-    if args.out.exists() and not args.out.is_dir():
-        parser.error(f"--out {args.out} is a file, not a folder")
+    run_folder.check_out(parser, "--out", args.out)
     _elastica()  # refuse before any work when the extra is missing
     results = run(program_seconds=args.seconds)
     args.out.mkdir(parents=True, exist_ok=True)

@@ -69,8 +69,9 @@ def test_fit_cli_writes_only_what_it_is_told(tmp_path, capsys):
         fit.main([])  # no --out and no --write-model: a usage error before any work
     assert err.value.code == 2
     assert "--write-model" in capsys.readouterr().err
+    (tmp_path / "file").write_text("")
     with pytest.raises(SystemExit):
-        fit.main(["--out", str(tmp_path / "missing" / "fit.json")])
+        fit.main(["--out", str(tmp_path / "file" / "fit.json")])
     with pytest.raises(SystemExit):
         fit.main(["--out", str(tmp_path), "--max-iter", "1"])
     model = constants.DEFAULT_MODEL_PATH.read_bytes()
@@ -115,3 +116,55 @@ def test_workspace_measures_ranges_and_the_widest_turn():
     assert w["x_range_m"] == pytest.approx(0.08) and w["y_range_m"] == pytest.approx(0.02)
     assert w["max_tilt_rad"] == pytest.approx(tilt)
     assert w["orientation_range_rad"] == pytest.approx(2 * tilt)
+
+
+def _commands():
+    """(module, argv with {out}, the function whose call would be work) of every mjx_arm
+    command that writes --out."""
+    from mjx_arm import fidelity, model_gen, xcheck
+
+    return [
+        (fit, ["--out", "{out}/fit.json", "--max-iter", "1"], "reference_data"),
+        (fidelity, ["--out", "{out}"], "run"),
+        (xcheck, ["--out", "{out}"], "run"),
+        (model_gen, ["--out", "{out}/arm.xml"], "generate_xml"),
+    ]
+
+
+@pytest.mark.parametrize("index", range(4))
+@pytest.mark.parametrize("where", ["under_a_file", "read_only"])
+def test_every_command_checks_out_before_any_work(index, where, tmp_path, monkeypatch, capsys):
+    """--out under a file (cannot be made) or on a read-only mount is a usage error (exit 2),
+    before a minute of work (xcheck failed after 121 s). A read-only mount is simulated where
+    the write probe happens: root passes every permission bit."""
+    from mjx_arm import run_folder
+
+    module, argv, work = _commands()[index]
+    monkeypatch.setattr(module, work, lambda *a, **k: pytest.fail(f"{work} ran"))
+    (tmp_path / "file").write_text("")
+    out = tmp_path / "file" / "sub"
+    if where == "read_only":
+        out = tmp_path / "ro"
+
+        def read_only(*args, **kwargs):
+            raise OSError(30, "Read-only file system")
+
+        monkeypatch.setattr(run_folder.tempfile, "TemporaryFile", read_only)
+    with pytest.raises(SystemExit) as stopped:
+        module.main([a.format(out=out) for a in argv])
+    err = capsys.readouterr().err
+    assert stopped.value.code == 2 and "--out" in err, err
+    assert ("is not a folder" if where == "under_a_file" else "Read-only") in err, err
+    assert not out.exists()
+
+
+def test_check_out_accepts_a_folder_it_can_make_and_refuses_a_folder_for_a_file(tmp_path):
+    import argparse
+
+    from mjx_arm import run_folder
+
+    parser = argparse.ArgumentParser()
+    assert run_folder.check_out(parser, "--out", tmp_path / "a" / "b") == tmp_path / "a" / "b"
+    assert not (tmp_path / "a").exists()  # checked, not made
+    with pytest.raises(SystemExit):
+        run_folder.check_out(parser, "--out", tmp_path, file=True)
