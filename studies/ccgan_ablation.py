@@ -48,6 +48,7 @@ from ccgan.sim_choice import SimulatorChoice, describe_programs
 from mjx_arm.atomic import write_atomically
 from mjx_arm.dataset import load_dataset
 from mjx_arm.machine import cpu_model
+from studies.checks import parse_checked_args
 from studies.study_folder import StudyFolder, load_study_folder
 
 #: The variants of one batch: the paper's weights, and each loss removed.
@@ -216,7 +217,7 @@ def main(argv=None) -> None:
     p.add_argument("--small", action="store_true", help="tiny networks (tests)")
     p.add_argument("--model", default="models/softarm.xml")
     p.add_argument("--out", required=True)
-    a = p.parse_args(argv)
+    a = parse_checked_args(p, argv)
     small = dict(gen_hidden=4, gen_fc=8, critic_features=(4,) * 5, batch_size=4) if a.small else {}
     try:
         base = TrainConfig(

@@ -38,6 +38,7 @@ from ccgan.forward import ForwardConfig
 from ccgan.sim_choice import SimulatorChoice
 from ccgan.tune import TUNED
 from mjx_arm.machine import cpu_model
+from studies.checks import parse_checked_args
 
 #: The paper's numbers for the searched fields (the authors' code's weights, the paper's rates).
 PAPER = {
@@ -66,7 +67,7 @@ def main(argv=None) -> None:
     p.add_argument("--model", default="models/softarm.xml")
     p.add_argument("--max-trials", type=int, default=None, help="the batch's first N trials only")
     p.add_argument("--out", required=True)
-    a = p.parse_args(argv)
+    a = parse_checked_args(p, argv)
     folder = Path(a.study_dir)
     study = optuna.load_study(study_name=a.study_name, storage=f"sqlite:///{folder / 'study.db'}")
     trials = [t for t in study.trials if t.user_attrs.get("batch") == a.batch][: a.max_trials]

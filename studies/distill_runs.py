@@ -23,6 +23,7 @@ import mjx_arm
 from bench import run_header, write_results
 from ccgan.cli import cli_parser
 from ccgan.distill import DistillConfig, held_out_programs, window_and_whole_x_err_cm
+from studies.checks import parse_checked_args
 
 
 def stretch_only_cm(run: dict) -> float:
@@ -72,7 +73,7 @@ def main(argv=None) -> None:
     p = cli_parser("studies.distill_runs", __doc__)
     p.add_argument("--runs", nargs="+", required=True, help="ccgan.distill output folders")
     p.add_argument("--out", required=True, help="output prefix (writes .json and .md)")
-    a = p.parse_args(argv)
+    a = parse_checked_args(p, argv)
     runs = []
     for folder in map(Path, a.runs):
         try:

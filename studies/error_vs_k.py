@@ -31,6 +31,7 @@ from ccgan.checkpoint import CheckpointError  # noqa: E402
 from ccgan.cli import cli_parser  # noqa: E402
 from ccgan.translator import load_translator  # noqa: E402
 from mjx_arm.programs import shape_like_programs  # noqa: E402
+from studies.checks import parse_checked_args
 from tracking import held, metrics, mpc  # noqa: E402
 
 
@@ -62,7 +63,7 @@ def main(argv=None) -> None:
     p.add_argument("--n", type=int, default=8, help="held-out programs")
     p.add_argument("--duration", type=float, default=60.0, help="seconds per program")
     p.add_argument("--out", required=True, help="output prefix (writes .json, .md and .png)")
-    a = p.parse_args(argv)
+    a = parse_checked_args(p, argv)
     try:
         sets = parse_sets(a.translators)
     except ValueError as err:

@@ -30,6 +30,7 @@ import numpy as np  # noqa: E402
 
 from bench import run_header, write_results  # noqa: E402
 from ccgan.cli import cli_parser  # noqa: E402
+from studies.checks import parse_checked_args
 
 #: The methods an `eval.shapes` table must hold, by the names this study gives them.
 SHAPE_METHODS = {"stretch": "stretch only", "mpc": "teacher (tracker)", "ccgan_sim": "distilled"}
@@ -97,7 +98,7 @@ def main(argv=None) -> None:
         "--distill-runs", required=True, help="studies.distill_runs' JSON holding every run"
     )
     p.add_argument("--out", required=True, help="output prefix (writes .json, .md and .png)")
-    a = p.parse_args(argv)
+    a = parse_checked_args(p, argv)
     try:
         runs = parse_runs(a.runs)
         distill_runs = json.loads(Path(a.distill_runs).read_text())

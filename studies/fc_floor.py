@@ -5,7 +5,9 @@ program, G_c's commands held k periods, run through F_c from the D_s pose before
 (`ccgan.trainer`'s feedback rollout), against the D_s poses. This study scores the same commands
 both ways on held-out shape-like programs (`shape_like_programs` split "fc_floor", full scale,
 never a test shape): stretch only (the D_s commands themselves) and each given translator's G_c
-(default: the chain's CCGAN-GP and its fine-tune through the MJX simulator, `ccgan.finetune`).
+(default: the chain's CCGAN-GP, one file per seed; the committed fc_floor.md also scored the
+retired fine-tune through the MJX simulator, studies/results/h200/issue29/finetune, at commit
+0fc38f3, whose default it was).
 
   - "simulator": X_err (cm) of the whole program held k periods from rest in the D_c simulator
     (MuJoCo C), every k-th pose against the D_s poses (what `eval` and the issue's target score);
@@ -39,14 +41,12 @@ from ccgan.data import (
 from ccgan.models import forward_open_loop
 from ccgan.translator import load_translator
 from mjx_arm.programs import shape_like_programs
+from studies.checks import parse_checked_args
 from tracking import held, metrics
 
-#: The chain's CCGAN-GP (studies/results/h200/issue29/chain) and its fine-tune through the MJX
-#: simulator (studies/results/h200/issue29/finetune), one file per seed.
+#: The chain's CCGAN-GP (studies/results/h200/issue29/chain), one file per seed.
 DEFAULT_TRANSLATORS = [
-    f"studies/results/h200/issue29/{stage}/translator_seed{seed}.ckpt"
-    for stage in ("chain/ccgan", "finetune")
-    for seed in (0, 1, 2)
+    f"studies/results/h200/issue29/chain/ccgan/translator_seed{seed}.ckpt" for seed in (0, 1, 2)
 ]
 
 
@@ -80,7 +80,7 @@ def main(argv=None) -> None:
     p.add_argument("--hold-factors", type=int, nargs="+", default=[15, 20])
     p.add_argument("--window", type=int, default=10, help="the feedback loss's window (steps)")
     p.add_argument("--out", required=True, help="output prefix (writes .json and .md)")
-    a = p.parse_args(argv)
+    a = parse_checked_args(p, argv)
     translators = [load_translator(path) for path in a.translators]
     if any(tr.f_c_params is None for tr in translators):
         p.error("every translator must hold its F_c")

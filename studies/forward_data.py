@@ -46,6 +46,7 @@ from ccgan.forward import ForwardConfig, make_train_forward
 from mjx_arm.atomic import write_atomically
 from mjx_arm.dataset import load_dataset
 from mjx_arm.machine import cpu_model
+from studies.checks import parse_checked_args
 from studies.forward_open_loop import open_loop_cm
 from studies.study_folder import StudyFolder, load_study_folder
 from tracking import held, metrics
@@ -239,7 +240,7 @@ def main(argv=None) -> None:
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--model", default="models/softarm.xml")
     p.add_argument("--out", required=True)
-    a = p.parse_args(argv)
+    a = parse_checked_args(p, argv)
     try:
         runs = list(dict.fromkeys(Run.parse(t) for t in a.runs))  # each once, in order
     except ValueError as err:

@@ -35,6 +35,7 @@ from ccgan import data as data_lib
 from ccgan.forward import ForwardConfig
 from ccgan.models import forward_open_loop
 from mjx_arm.machine import cpu_model
+from studies.checks import parse_checked_args
 from studies.study_folder import load_study_folder
 from tracking import held, metrics
 
@@ -65,7 +66,7 @@ def main(argv=None) -> None:
     p.add_argument("--hold-factors", type=int, nargs="+", default=[1, 10, 15, 20])
     p.add_argument("--model", default="models/softarm.xml")
     p.add_argument("--out", required=True)
-    a = p.parse_args(argv)
+    a = parse_checked_args(p, argv)
     study = load_study_folder(a.study_dir, a.model)
     folder, arm_s, arm_c, bounds, n_val = (
         study.folder,

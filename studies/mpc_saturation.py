@@ -22,6 +22,7 @@ import mjx_arm
 from bench import run_header, write_results
 from ccgan.cli import cli_parser
 from mjx_arm.programs import shape_like_programs
+from studies.checks import parse_checked_args
 from tracking import held, metrics, mpc
 
 
@@ -39,7 +40,7 @@ def main(argv=None) -> None:
         "--runs", nargs="+", default=["7:1:2"], help="k:horizon_steps:iterations triples"
     )
     p.add_argument("--out", required=True, help="output prefix (writes .json and .md)")
-    a = p.parse_args(argv)
+    a = parse_checked_args(p, argv)
     arm_s, arm_c = mjx_arm.load(a.model, "source"), mjx_arm.load(a.model, "constrained")
     lo, hi = arm_c.valve.p_min_bar, arm_c.valve.p_max_bar
     programs = shape_like_programs(a.n, a.duration, seed=0, split="mpc_study", full_scale=True)

@@ -17,6 +17,7 @@ import mjx_arm
 from bench import run_header, write_results
 from ccgan.cli import cli_parser
 from mjx_arm.programs import CONTROL_HZ, SHAPES
+from studies.checks import parse_checked_args
 from tracking import held, metrics, mpc
 from tracking.oracle import OracleConfig, oracle_commands
 
@@ -28,7 +29,7 @@ def main(argv=None) -> None:
     p.add_argument("--steps", type=int, default=10)
     p.add_argument("--runs", nargs="+", default=["mpc:0.3", "mpc:0.03"], help="start:lr pairs")
     p.add_argument("--out", required=True, help="output prefix (writes .json and .md)")
-    a = p.parse_args(argv)
+    a = parse_checked_args(p, argv)
     k = 10
     arm_s, arm_c = mjx_arm.load(domain="source"), mjx_arm.load(domain="constrained")
     n = int(round(a.horizon * CONTROL_HZ))

@@ -29,6 +29,7 @@ import mjx_arm
 from bench import run_header, write_results
 from ccgan.cli import cli_parser
 from ccgan.distill import DistillConfig, held_out_programs
+from studies.checks import parse_checked_args
 from tracking import mpc
 from tracking.metrics import position_error_cm
 
@@ -74,7 +75,7 @@ def main(argv=None) -> None:
     )
     p.add_argument("--duration-s", type=float, default=60.0, help="program length (s)")
     p.add_argument("--out", required=True, help="output prefix (writes .md and .json)")
-    a = p.parse_args(argv)
+    a = parse_checked_args(p, argv)
     if min(a.substeps) < 1 or a.teacher_programs < 0:
         p.error("--substeps must be >= 1 and --teacher-programs >= 0")
     chain = DistillConfig(n_train=1, batch_size=1, n_val=8, n_val_full=8, duration_s=a.duration_s)

@@ -31,6 +31,7 @@ from ccgan.checkpoint import CheckpointError  # noqa: E402
 from ccgan.cli import cli_parser  # noqa: E402
 from ccgan.translator import load_translator  # noqa: E402
 from mjx_arm.programs import shape_like_programs  # noqa: E402
+from studies.checks import parse_checked_args
 from tracking import held, metrics, mpc  # noqa: E402
 
 #: The chain's distilled translators, one per seed.
@@ -69,7 +70,7 @@ def main(argv=None) -> None:
         "--iterations", type=int, default=1, help="the teacher's Gauss-Newton iterations per step"
     )
     p.add_argument("--out", required=True, help="output prefix (writes .json, .md and .png)")
-    a = p.parse_args(argv)
+    a = parse_checked_args(p, argv)
     window = int(round(a.window_s * STEPS_PER_S))
     if not 0 < window < int(round(a.duration * STEPS_PER_S)):
         p.error(f"--window-s {a.window_s} must be shorter than --duration {a.duration}")

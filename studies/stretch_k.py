@@ -13,6 +13,7 @@ import mjx_arm
 from bench import run_header, write_results
 from ccgan.cli import cli_parser
 from mjx_arm.programs import validation_program
+from studies.checks import parse_checked_args
 from tracking.held import choose_stretch_k
 
 #: The candidates `eval.shapes` tries (its EvalConfig.hold_factors).
@@ -24,7 +25,7 @@ def main(argv=None) -> None:
     p.add_argument("--model", default="models/softarm.xml", help="the arm's MJCF")
     p.add_argument("--domains", nargs="+", default=["constrained", "aged"])
     p.add_argument("--out", required=True, help="output prefix (writes .json and .md)")
-    a = p.parse_args(argv)
+    a = parse_checked_args(p, argv)
     arm_s = mjx_arm.load(a.model, "source")
     program = validation_program()
     rows = {}

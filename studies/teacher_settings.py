@@ -19,6 +19,7 @@ import mjx_arm  # noqa: F401  (before jax: sets the XLA CPU flag)
 from bench import run_header, write_results
 from ccgan.cli import cli_parser
 from mjx_arm.programs import shape_like_programs
+from studies.checks import parse_checked_args
 from tracking import held, metrics, mpc
 
 
@@ -46,7 +47,7 @@ def main(argv=None) -> None:
         help="HORIZON:ITERATIONS pairs to compare",
     )
     p.add_argument("--out", required=True, help="output prefix (writes .json and .md)")
-    a = p.parse_args(argv)
+    a = parse_checked_args(p, argv)
     try:
         settings = [parse_setting(text) for text in a.settings]
     except ValueError as err:

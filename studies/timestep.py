@@ -25,6 +25,7 @@ from ccgan.cli import cli_parser
 from mjx_arm import ArmParams, generate_xml
 from mjx_arm.machine import cpu_model
 from mjx_arm.programs import bench_programs
+from studies.checks import parse_checked_args
 
 REFERENCE_STEP_S = 0.0005
 
@@ -56,7 +57,7 @@ def main(argv: list[str] | None = None) -> None:
         default=Path("runs/studies"),
         help="output folder (committed results: studies/results/cpu)",
     )
-    args = parser.parse_args(argv)
+    args = parse_checked_args(parser, argv)
     commands = bench_programs(args.trajectories, int(round(args.seconds * 10)), seed=7)
 
     def load(n, dt, domain):

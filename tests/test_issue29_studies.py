@@ -127,3 +127,40 @@ def test_fc_floor_scores_commands_window_by_window_as_the_feedback_loss():
             pred = tr.predict_poses(held.stretch(programs[i, steps], k), pose0)
             want = metrics.position_error_cm(held.every_kth(pred, k), targets[i, steps])
             np.testing.assert_allclose(got[i, steps], want, rtol=1e-4, atol=1e-5)
+
+
+#: Every study command with the other flags it requires (values never read: --out is refused
+#: first).
+STUDY_ARGS = {
+    "ccgan_ablation": ["--study-dir", "d", "--label", "l"],
+    "ccgan_budget": ["--study-dir", "d"],
+    "distill_runs": ["--runs", "r"],
+    "error_vs_k": [],
+    "error_vs_k_shapes": ["--runs", "r", "--distill-runs", "r"],
+    "fc_floor": [],
+    "forward_data": ["--study-dir", "d", "--runs", "long:800:open:150"],
+    "forward_open_loop": ["--study-dir", "d"],
+    "mpc_saturation": [],
+    "oracle_start": [],
+    "planning_arm": [],
+    "program_length": [],
+    "stretch_k": [],
+    "teacher_settings": [],
+    "timestep": [],
+}
+
+
+@pytest.mark.parametrize("name", sorted(STUDY_ARGS))
+def test_every_study_refuses_an_out_it_cannot_write_before_any_work(name, tmp_path, capsys):
+    """An --out under a file is a usage error naming --out, before the study reads or runs
+    anything (it would otherwise fail with an OSError after minutes of simulation)."""
+    import importlib
+
+    study = importlib.import_module(f"studies.{name}")
+    (tmp_path / "a_file").write_text("not a folder")
+    with pytest.raises(SystemExit) as exc:
+        study.main([*STUDY_ARGS[name], "--out", str(tmp_path / "a_file" / "out")])
+    assert exc.value.code == 2
+    err = capsys.readouterr().err
+    assert "--out" in err and "is not a folder" in err, err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["a_file"]

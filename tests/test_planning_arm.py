@@ -151,36 +151,6 @@ def test_ccgan_train_scores_k_in_the_copy_when_asked(monkeypatch):
         assert made[-1].n_substeps == want and made[-1].domain.name == "constrained"
 
 
-def test_finetune_runs_its_gradient_through_the_copy(small_xml, monkeypatch):
-    from ccgan import finetune, load_translator
-    from ccgan.translator import SOLID_TRANSLATORS_DIR
-
-    arm_s = mjx_arm.load(xml=small_xml, domain="source")
-    arm_c = mjx_arm.load(xml=small_xml, domain="constrained")
-    solid = load_translator(
-        SOLID_TRANSLATORS_DIR / "ccgan" / "translator.ckpt", trust_unlabelled=True
-    )
-    seen = []
-
-    class Built(Exception):
-        pass
-
-    def stop_when_built(translator, arm, *args):
-        seen.append(arm)
-        raise Built
-
-    monkeypatch.setattr(finetune, "make_finetune_step", stop_when_built)
-    config = finetune.FinetuneConfig(
-        steps=1, batch_size=1, window_s=0.5, n_train=1, n_val=1, anchor_s=1.0, n_anchor=1,
-        sim_substeps=5,
-    )  # fmt: skip
-    with pytest.raises(Built):
-        finetune.finetune([solid], arm_s, arm_c, config, progress=False)
-    assert seen[0].n_substeps == 5 and seen[0].model_hash == arm_c.model_hash + "-s5"
-    with pytest.raises(finetune.ConfigError, match="sim_substeps"):
-        dataclasses.replace(config, sim_substeps=-1)
-
-
 def test_distill_scores_its_held_out_programs_in_the_copy(arm_c, tmp_path, monkeypatch):
     """On the committed arm (the 3-segment test arm is far stiffer for its inertia, and a copy
     of 5 steps moves it differently)."""
