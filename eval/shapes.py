@@ -7,7 +7,7 @@ module's `main`; `python -m eval.shapes --help` lists the options): the flags be
 The pressure programs themselves are pure functions of time and live below every layer that
 draws them, in `mjx_arm.programs` (the circle, rectangle, damped circle, ellipse and kite, each
 a [T, 3] array of chamber commands in bar at 10 Hz; the validation program; the random
-shape-like programs of the fine-tunes). They are re-exported here under their old names, for
+shape-like programs of the distillation). They are re-exported here under their old names, for
 users of `eval.shapes`.
 """
 

@@ -238,7 +238,7 @@ README_METHODS = (
     ("stretch", "stretch only"),
     ("ccgan", "CCGAN-GP"),
     ("wcgan", "WCGAN-GP"),
-    ("ccgan_sim", "distilled"),
+    ("ccgan_sim", METHOD_NAMES["ccgan_sim"]),
     ("mpc", "tracker"),
     ("oracle", "oracle, first 2 s"),
 )
