@@ -4,6 +4,31 @@ from __future__ import annotations
 
 import math
 
+from mjx_arm import fitted
+
+
+def _damper_drag_words(cosserat: dict) -> str:
+    """What the reference rod's dampers (`cosserat["damping_per_s"]`, per domain, at its
+    `timestep_s`) are as linear drags (`fitted.damper_drag_rate_per_s`), and their ratio beside
+    the dampers' own: e.g. "a linear drag of 867.6 and 19,765 1/s per unit mass: the
+    constrained medium is 22.8x the source's, not 10x"."""
+    damping, dt_s = cosserat["damping_per_s"], cosserat["timestep_s"]
+    source, constrained = (
+        fitted.damper_drag_rate_per_s(damping[d], dt_s) for d in ("source", "constrained")
+    )
+
+    def rate(x: float) -> str:
+        return f"{x:,.1f}" if x < 1000 else f"{x:,.0f}"
+
+    ratio, nominal = constrained / source, damping["constrained"] / damping["source"]
+    versus = (
+        f"not {nominal:g}x" if abs(ratio / nominal - 1) > 0.005 else f"as the dampers' {nominal:g}x"
+    )
+    return (
+        f"a linear drag of {rate(source)} and {rate(constrained)} 1/s per unit mass: the"
+        f" constrained medium is {ratio:.1f}x the source's, {versus}"
+    )
+
 
 def _regime_lines(results: dict) -> list[str]:
     """The regime table: what the committed arm does, rod and chain, beside the solid disc."""
@@ -191,8 +216,7 @@ def to_markdown(results: dict) -> str:
         f"{' (force / e, couple / e^3, as PyElastica)' if c.get('law') == 'gazzola' else ''},"
         " the paper code's damper v <- v exp(-c dt) at c ="
         f" {c['damping_per_s']['source']:g} / {c['damping_per_s']['constrained']:g} 1/s and its"
-        f" step of {c['timestep_s'] * 1e6:.0f} us (a linear drag of 867.6 and 19,765 1/s per unit"
-        " mass: the constrained medium is 22.8x the source's, not 10x). The committed model's"
+        f" step of {c['timestep_s'] * 1e6:.0f} us ({_damper_drag_words(c)}). The committed model's"
         " media were fitted to this rod by `python -m mjx_arm.fit` on other programs; everything"
         " below is held out. The earlier solid-disc model's report is `results/fidelity_solid.md`.",
         "",

@@ -168,3 +168,18 @@ def test_check_out_accepts_a_folder_it_can_make_and_refuses_a_folder_for_a_file(
     assert not (tmp_path / "a").exists()  # checked, not made
     with pytest.raises(SystemExit):
         run_folder.check_out(parser, "--out", tmp_path, file=True)
+
+
+def test_the_report_computes_the_damper_drags_from_its_results():
+    """The figures "867.6 and 19,765 1/s ... 22.8x" come from the results' dampers and step:
+    (exp(c dt) - 1) / dt, worked out by hand for c = 800 and 2000 1/s at dt = 2e-4 s."""
+    from mjx_arm import constants, fidelity_report
+
+    results = json.loads((constants.ROOT / "results" / "fidelity.json").read_text())
+    text = fidelity_report.to_markdown(results)
+    assert "a linear drag of 867.6 and 19,765 1/s" in text and "is 22.8x the source's" in text
+    results["cosserat"]["damping_per_s"] = {"source": 800.0, "constrained": 2000.0}
+    text = fidelity_report.to_markdown(results)
+    # exp(0.16) - 1 = 0.17351 -> 867.6 1/s; exp(0.4) - 1 = 0.49182 -> 2,459 1/s; ratio 2.83
+    assert "a linear drag of 867.6 and 2,459 1/s" in text, text[:2000]
+    assert "is 2.8x the source's, not 2.5x" in text and "19,765" not in text
