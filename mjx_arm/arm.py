@@ -11,6 +11,7 @@ This module holds the `Arm`, `load` and the pure MJX rollout (`rollout_program`,
 
 from __future__ import annotations
 
+import contextlib
 import copy
 import dataclasses
 import functools
@@ -353,7 +354,11 @@ def rollout_program(
 
 def mjx_precision():
     """The matrix-product precision of MJX code, as a context: `MJX_MATMUL_PRECISION`, read
-    here, when the code is traced, so that `bench.teacher` can set the module attribute."""
+    here, when the code is traced, so that `bench.teacher` can set the module attribute. None
+    sets nothing: the caller's precision holds (JAX's default when the caller sets none);
+    `jax.default_matmul_precision(None)` would instead reset a caller's setting."""
+    if MJX_MATMUL_PRECISION is None:
+        return contextlib.nullcontext()
     return jax.default_matmul_precision(MJX_MATMUL_PRECISION)
 
 

@@ -274,4 +274,7 @@ def test_mjx_precision_is_one_setting_a_benchmark_can_lower(small_xml, monkeypat
     with jax.default_matmul_precision("bfloat16"):
         jaxpr = jax.make_jaxpr(arm.period_fn(arm.mjx_model))(carry, jnp.ones(3, jnp.float32))
     precisions = set(_dot_precisions(jaxpr.jaxpr))
+    # Products are traced (an empty set would pass the next line), and with the caller's setting.
+    assert precisions, "no matrix product traced"
     assert (jax.lax.Precision.HIGHEST, jax.lax.Precision.HIGHEST) not in precisions, precisions
+    assert (jax.lax.Precision.DEFAULT, jax.lax.Precision.DEFAULT) in precisions, precisions

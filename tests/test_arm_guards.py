@@ -169,3 +169,105 @@ def test_an_mjcf_without_its_constrained_medium_needs_a_domain(small_xml):
         solid.mj_model.opt.viscosity
         > mjx_arm.load(mjx_arm.constants.SOLID_MODEL_PATH).mj_model.opt.viscosity
     )
+
+
+# ------------------------------------------------------------------ argument types, before work
+
+
+@pytest.mark.parametrize("chunk", [2.5, "8", None, True, np.float64(4.0)])
+@pytest.mark.parametrize("backend", ["c", "mjx"])
+def test_a_chunk_that_is_not_an_int_is_refused_by_name(small_arm, chunk, backend, monkeypatch):
+    monkeypatch.setattr(type(small_arm), "_rollout_mjx", lambda *a: pytest.fail("simulated"))
+    monkeypatch.setattr(type(small_arm), "_rollout_c", lambda *a, **k: pytest.fail("simulated"))
+    with pytest.raises(TypeError, match=r"chunk must be an int >= 1 \(trajectories per call\)"):
+        small_arm.rollout(np.ones((2, 3)), backend=backend, chunk=chunk)
+    with pytest.raises(TypeError, match="chunk must be an int"):
+        small_arm.rollout_c_from(small_arm.rest_state(1), np.ones((1, 2, 3)), chunk=chunk)
+
+
+def test_chunk_below_one_is_refused(small_arm):
+    with pytest.raises(ValueError, match="chunk must be an int >= 1"):
+        small_arm.rollout(np.ones((2, 3)), backend="c", chunk=0)
+
+
+@pytest.mark.parametrize(
+    "pressures", [np.ones((2, 3), bool), [[True, False, True]], [["1.0", "2", "3"]], [[1j, 0, 0]]]
+)
+def test_pressures_must_be_real_numbers_not_bools(small_arm, pressures):
+    with pytest.raises(TypeError, match="pressures_bar must be real numbers in bar"):
+        small_arm.rollout(pressures, backend="c")
+    with pytest.raises(TypeError, match="pressures_bar must be real numbers in bar"):
+        mjx_arm.check_pressures(pressures)
+
+
+def test_integer_pressures_are_bar(small_arm):
+    np.testing.assert_array_equal(
+        small_arm.rollout(np.ones((2, 3), int), backend="c"),
+        small_arm.rollout(np.ones((2, 3)), backend="c"),
+    )
+
+
+@pytest.mark.parametrize(
+    "start", [(np.zeros((1, 5)), np.zeros((1, 3))), np.zeros((1, 5)), {"physics": 0}]
+)
+def test_a_start_that_is_not_a_sim_state_is_named(small_arm, start):
+    with pytest.raises(TypeError, match=r"start must be a mjx_arm.SimState \(Arm.rest_state"):
+        small_arm.rollout_c_from(start, np.ones((1, 2, 3)))
+
+
+@pytest.mark.parametrize(
+    "field, value, error",
+    [
+        ("viscosity", "5", TypeError),
+        ("viscosity", True, TypeError),
+        ("viscosity", np.float32(-1), ValueError),
+        ("viscosity", 1 + 0j, TypeError),
+        ("viscosity_scale", np.bool_(True), TypeError),
+        ("stiffness_scale", None, TypeError),
+        ("stiffness_scale", -0.7, ValueError),
+        ("mass_scale", float("nan"), ValueError),
+        ("inertia_scale", 0, ValueError),
+        ("name", 3, TypeError),
+    ],
+)
+def test_domain_refuses_non_real_bool_and_negative_fields(field, value, error):
+    with pytest.raises(error, match=f"Domain.{field} must be"):
+        mjx_arm.Domain(**{field: value})
+
+
+def test_domain_keeps_valid_numpy_scalars_as_floats():
+    domain = mjx_arm.Domain(viscosity=np.float32(5.0), stiffness_scale=np.int64(1), mass_scale=2)
+    assert domain.viscosity == 5.0 and type(domain.viscosity) is float
+    assert type(domain.stiffness_scale) is float and domain.mass_scale == 2.0
+    assert mjx_arm.Domain(viscosity_scale=None).viscosity_scale is None
+
+
+@pytest.mark.parametrize("n_segments", [10.5, "10", True])
+def test_n_segments_must_be_a_whole_number(n_segments):
+    import dataclasses
+
+    params = dataclasses.replace(mjx_arm.ArmParams(), n_segments=n_segments)
+    with pytest.raises(TypeError, match="n_segments must be an int >= 2"):
+        mjx_arm.generate_xml(params)
+
+
+def test_the_first_mjx_compile_of_a_batch_shape_is_announced_once(small_arm, capsys, monkeypatch):
+    """A cold MJX compile takes a minute or more and printed nothing: one stderr line before the
+    first call of each batch shape, none after (the jitted call itself is replaced: no compile)."""
+    calls = []
+    monkeypatch.setitem(
+        small_arm.__dict__,
+        "_jit_batched",
+        lambda model, commands: (
+            calls.append(commands.shape)
+            or (np.zeros(commands.shape[:2] + (6,)), np.ones(commands.shape[:2], bool))
+        ),
+    )
+    small_arm.rollout(np.ones((4, 7, 3)))
+    small_arm.rollout(np.ones((4, 7, 3)))
+    err = capsys.readouterr().err
+    assert err.count("compiling the MJX rollout for batch 4 x 7 steps (about ") == 1, err
+    assert "the first time on this machine" in err
+    small_arm.rollout(np.ones((5, 7, 3)))
+    assert "batch 5 x 7 steps" in capsys.readouterr().err
+    assert calls == [(4, 7, 3), (4, 7, 3), (5, 7, 3)]
