@@ -107,7 +107,8 @@ def distill(
         `config.hold_factor` sets one), one per seed.
       arm_s, arm_c: the D_s and D_c arms.
       config: settings.
-      cache: file for the teacher's commands (read when its settings match, else written).
+      cache: file for the teacher's commands (read when its key matches, `teacher_cache_key`;
+        else planned and written, a cache of another key first moved aside).
       on_validation: optional callable(best parameters per translator, history), called after
         every validation but the first with the best iterates so far (e.g. to write them, so
         that a killed run keeps its progress); the history then has "complete": False.
