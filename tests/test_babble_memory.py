@@ -25,7 +25,7 @@ def test_a_run_too_large_for_the_memory_is_refused_before_any_work(tmp_path, cap
     assert "16 GB are available" in str(exc.value) and "trajectories per domain" in str(exc.value)
     assert babble.check_memory(babble.PAPER, available=16 * 10**9) < 10**9
     # The library refuses too, before loading any arm.
-    monkeypatch.setattr(babble, "available_memory_bytes", lambda: 16 * 10**9)
+    monkeypatch.setattr(babble.memory, "available_memory_bytes", lambda: 16 * 10**9)
     monkeypatch.setattr(babble.arm_lib, "load", lambda *a, **k: pytest.fail("did work"))
     with pytest.raises(babble.NotEnoughMemoryError):
         babble.babble(big, progress=False)
