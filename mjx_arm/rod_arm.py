@@ -11,8 +11,8 @@ simulator, a rod under Gazzola's law, as well as on the fitted chain.
 The rollout is `mjx_arm.cosserat`'s (`mjx_arm.rod_dynamics.rollout_single`: position Verlet at the
 paper code's 2e-4 s, its analytical damper), jitted and vmapped over the batch, compiled once per
 domain, dtype and program shape. In float64 (the default) it is the committed reference path
-that `mjx_arm.fidelity` and `mjx_arm.fit` call, to rounding; `python -m mjx_arm.rod_arm` checks
-that on the fidelity report's programs. float32 (`dtype="float32"`) is offered for speed;
+that `mjx_arm.fidelity` and `mjx_arm.fit` call, to rounding; `python -m mjx_arm.rod_check`
+checks that on the fidelity report's programs. float32 (`dtype="float32"`) is offered for speed;
 `bench.rod_throughput` measures what it costs in accuracy and gains in speed
 (bench/results/cpu/rod_throughput.md).
 
@@ -29,10 +29,8 @@ Domains map onto the rod as follows (`rod_params`):
 
 from __future__ import annotations
 
-import argparse
 import dataclasses
 import functools
-import sys
 
 import jax
 import jax.numpy as jnp
@@ -47,7 +45,7 @@ from mjx_arm.rod_params import DOMAIN_DAMPING_PER_S, CosseratParams, RodState, m
 #: The rollout's floating-point types; float64 is the default (see `RodArm`).
 DTYPES = ("float64", "float32")
 #: Largest tip difference (fraction of L) allowed between `RodArm` in float64 and the committed
-#: reference path (`cosserat.rollout`) by `python -m mjx_arm.rod_arm` and the tests.
+#: reference path (`cosserat.rollout`) by `python -m mjx_arm.rod_check` and the tests.
 AGREEMENT_FRACTION_OF_L = 1e-6
 
 
@@ -90,7 +88,15 @@ def _batched_rollout(params: CosseratParams, dtype: str, valve_params: valve.Val
     """jit(vmap(rollout_single)) of one rod in `dtype`: commands [B, T, 3] -> poses [B, T, 6]."""
     rod = make_rod(params).astype(dtype)
     rest = RodState(*(np.asarray(a, dtype) for a in cosserat.rest_state(params)))
-    single = functools.partial(rollout_single, rod, params.n_substeps, valve_params, rest)
+    bound = functools.partial(rollout_single, rod, params.n_substeps, valve_params, rest)
+
+    def single(commands):
+        # Full float32 products: JAX's default lets XLA use TensorFloat32 (a 10-bit mantissa) for
+        # float32 matrix products on NVIDIA GPUs, as `mjx_arm.arm.mjx_precision` says for the
+        # chain. No effect on CPUs or in float64.
+        with jax.default_matmul_precision("highest"):
+            return bound(commands)
+
     return jax.jit(jax.vmap(single))
 
 
@@ -199,54 +205,3 @@ def load_rod(
     return RodArm(
         params=rod_params(domain, arm, n_elements), domain=domains.resolve(domain), dtype=dtype
     )
-
-
-def agreement(seconds: float | None = None) -> dict:
-    """Largest tip and d3 differences between `RodArm` (float64) and the committed reference path
-    (`cosserat.rollout` with `CosseratParams.from_arm`, as `mjx_arm.fidelity` runs it) on the
-    fidelity report's held-out programs, per domain; `seconds` shortens them."""
-    from mjx_arm import fidelity
-    from mjx_arm.programs import held_program
-
-    length = seconds or fidelity.BABBLE_SECONDS
-    programs = np.stack(
-        [held_program(s, length, fidelity.BABBLE_HOLD_PERIODS) for s in fidelity.BABBLE_SEEDS]
-    )
-    out = {}
-    for domain in fidelity.DOMAINS:
-        reference = cosserat.rollout(programs, CosseratParams.from_arm(ArmParams(), domain))
-        rod = load_rod(domain)
-        poses = rod.rollout(programs)
-        tip = float(np.linalg.norm(poses[..., :3] - reference[..., :3], axis=-1).max())
-        out[domain] = {
-            "programs": len(programs),
-            "seconds": length,
-            "max_tip_fraction_of_L": tip / rod.length_m,
-            "max_d3_difference": float(np.abs(poses[..., 3:] - reference[..., 3:]).max()),
-        }
-    return out
-
-
-def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(
-        prog="python -m mjx_arm.rod_arm",
-        description="Checks that the rod arm (float64) agrees with the committed reference rod path"
-        f" to {AGREEMENT_FRACTION_OF_L:g} of L on the fidelity report's programs (3 x 60 s,"
-        " source and constrained; minutes on a CPU). Exit status 1 if not.",
-    )
-    parser.add_argument("--seconds", type=float, default=None, help="shorten the programs (s)")
-    args = parser.parse_args(argv)
-    result = agreement(args.seconds)
-    worst = max(r["max_tip_fraction_of_L"] for r in result.values())
-    for domain, r in result.items():
-        print(
-            f"{domain}: {r['programs']} x {r['seconds']:g} s, largest tip difference"
-            f" {r['max_tip_fraction_of_L']:.3g} of L, d3 {r['max_d3_difference']:.3g}"
-        )
-    ok = worst <= AGREEMENT_FRACTION_OF_L
-    print(("agrees" if ok else "DOES NOT agree") + f" to {AGREEMENT_FRACTION_OF_L:g} of L")
-    return 0 if ok else 1
-
-
-if __name__ == "__main__":
-    sys.exit(main())

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 import mjx_arm
-from mjx_arm import cosserat, rod_arm, valve
+from mjx_arm import cosserat, rod_arm, rod_check, valve
 from mjx_arm.model_gen import ArmParams
 from mjx_arm.programs import held_program
 
@@ -149,6 +149,6 @@ def test_the_agreement_command_fails_above_1e_6_of_l(monkeypatch, capsys, differ
     row = {"programs": 3, "seconds": 60.0, "max_d3_difference": 0.0}
     found = {"source": row | {"max_tip_fraction_of_L": 0.0}}
     found["constrained"] = row | {"max_tip_fraction_of_L": difference}
-    monkeypatch.setattr(rod_arm, "agreement", lambda seconds: found)
-    assert rod_arm.main([]) == status
+    monkeypatch.setattr(rod_check, "agreement", lambda seconds: found)
+    assert rod_check.main([]) == status
     assert ("DOES NOT agree" in capsys.readouterr().out) == bool(status)
