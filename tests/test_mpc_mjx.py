@@ -82,3 +82,19 @@ def test_mjx_tracker_stopped_goes_on_where_it_stopped(arms, tmp_path):
     got, info = mpc_mjx.track(arm_c, targets, k, programs, **run)
     assert info["resumed_steps"] == 0 and "saved for other programs" in logs[0]
     np.testing.assert_array_equal(got, whole)
+
+
+def test_a_resume_file_of_another_medium_does_not_match():
+    """Two domains share the MJCF's hash: the resume fingerprint must tell them apart, or a
+    teacher_partial.npz planned in the aged arm would be resumed for D_c."""
+    from types import SimpleNamespace
+
+    from mjx_arm import domains
+
+    cfg = mpc.MpcConfig(horizon_steps=2)
+    init, target = np.zeros((1, 4, 3)), np.zeros((1, 4, 6))
+    arm_c = SimpleNamespace(model_hash="same", domain=domains.CONSTRAINED)
+    arm_a = SimpleNamespace(model_hash="same", domain=domains.AGED)
+    key_c = mpc_mjx._fingerprint(arm_c, 2, cfg, init, target, 3)
+    assert key_c == mpc_mjx._fingerprint(arm_c, 2, cfg, init, target, 3)
+    assert key_c != mpc_mjx._fingerprint(arm_a, 2, cfg, init, target, 3)

@@ -139,10 +139,12 @@ class TrackingStopped(RuntimeError):
 
 
 def _fingerprint(arm_c: Arm, k: int, cfg: MpcConfig, init, target, chunk_steps: int) -> str:
-    """What a resume file must match: the arm, k, the settings, the inputs and the chunking."""
+    """What a resume file must match: the arm and its medium, k, the settings, the inputs and the
+    chunking (two domains share the MJCF's hash, so the domain is named on its own)."""
     h = hashlib.sha256()
     precision = mjx_arm_arm.MJX_MATMUL_PRECISION
-    h.update(repr((arm_c.model_hash, k, cfg, chunk_steps, precision)).encode())
+    domain = getattr(arm_c, "domain", None)
+    h.update(repr((arm_c.model_hash, domain, k, cfg, chunk_steps, precision)).encode())
     for a in (init, target):
         h.update(repr(a.shape).encode())
         h.update(np.ascontiguousarray(a).tobytes())
