@@ -152,3 +152,17 @@ def test_the_agreement_command_fails_above_1e_6_of_l(monkeypatch, capsys, differ
     monkeypatch.setattr(rod_check, "agreement", lambda seconds: found)
     assert rod_check.main([]) == status
     assert ("DOES NOT agree" in capsys.readouterr().out) == bool(status)
+
+
+def test_a_diverged_trajectory_is_reported(monkeypatch, source_rod, programs):
+    def diverging(params, dtype, valve_params):
+        def run(commands):
+            poses = np.zeros(commands.shape[:2] + (6,))
+            poses[1, 3:] = np.nan  # trajectory 1 from period 3 on
+            return poses
+
+        return run
+
+    monkeypatch.setattr(rod_arm, "_batched_rollout", diverging)
+    with pytest.raises(mjx_arm.SimulationDivergedError, match="1 of 2.*trajectory 1 at period 3"):
+        source_rod.rollout(programs)
