@@ -77,7 +77,7 @@ class BestGenerators:
 
     def settled(self, epochs_done: int, config: TrainConfig) -> bool:
         """True when `config.patience` (> 0) scorings up to `epochs_done` gave no seed a lower
-        error than it had: the early stop of `train`."""
+        error than it had: the early stop of `train_and_evaluate`."""
         if not config.patience or self.gen is None:
             return False
         return epochs_done - int(self.epoch.max()) >= config.patience * config.stretch_every
