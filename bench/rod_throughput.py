@@ -48,20 +48,25 @@ from mjx_arm.rod_arm import DTYPES
 BACKENDS = ("rod float64", "rod float32", "chain MJX", "chain MuJoCo C")
 
 
-def timed_rollout(rollout, commands: np.ndarray, jitted: bool) -> dict:
-    """A first call and a timed second call of `rollout`. A jitted backend's first call runs the
-    same batch (it compiles for that shape; its time is reported); MuJoCo C's only warms its
-    thread pool on one period of one program, so a large batch is not run twice."""
+def timed_rollout(rollout, commands: np.ndarray, jitted: bool, repeats: int) -> dict:
+    """A first call, then the best of `repeats` timed calls of `rollout` (the best: on a shared
+    machine other work only ever slows a call down). A jitted backend's first call runs the same
+    batch (it compiles for that shape; its time is reported); MuJoCo C's only warms its thread
+    pool on one period of one program, so a large batch is not run once more than timed."""
     start = time.perf_counter()
     rollout(commands if jitted else commands[:1, :1])
     first = time.perf_counter() - start
-    start = time.perf_counter()
-    poses = rollout(commands)
-    wall = time.perf_counter() - start
+    walls = []
+    for _ in range(repeats):
+        start = time.perf_counter()
+        poses = rollout(commands)
+        walls.append(time.perf_counter() - start)
+    wall = min(walls)
     batch, periods = commands.shape[:2]
     return {
         "first_call_s": first if jitted else None,
         "wall_s": wall,
+        "wall_s_each": walls,
         "sim_s_per_wall_s": batch * periods / constants.CONTROL_HZ / wall,
         "finite": bool(np.isfinite(poses).all()),
     }
@@ -132,7 +137,8 @@ def markdown(result: dict) -> list[str]:
         f" JAX compilation cache {m.get('compilation_cache') or 'off'}",
         "",
         f"Programs of {p['seconds']:g} s at 10 Hz (`bench_programs`), domain {p['domain']}."
-        " Simulated s per wall s (batch x program length / wall time of the timed call); in"
+        f" Simulated s per wall s (batch x program length / wall time of the best of"
+        f" {p.get('repeats', 1)} timed calls); in"
         " brackets the first call's time, which compiles the jitted backends (s); MuJoCo C runs"
         f" batches up to {p.get('c_max_batch', '-')}. Rod: 20"
         " elements, 500 steps of 2e-4 s per period; chain: 10 segments, 25 steps of 4 ms.",
@@ -186,6 +192,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--seconds", type=float, default=10.0, help="simulated s per program")
     parser.add_argument("--domain", default="source", choices=sorted(mjx_arm.DOMAINS))
     parser.add_argument("--dtypes", nargs="+", default=list(DTYPES), choices=DTYPES)
+    parser.add_argument("--repeats", type=int, default=3, help="timed calls; the best counts")
     parser.add_argument("--no-chain", action="store_true", help="time the rod only")
     parser.add_argument(
         "--c-max-batch",
@@ -198,8 +205,11 @@ def main(argv: list[str] | None = None) -> int:
     )
     parser.add_argument("--accuracy-domains", nargs="+", default=list(fidelity.DOMAINS))
     args = parser.parse_args(argv)
-    if min(args.batch + [args.c_max_batch]) < 1 or args.seconds * constants.CONTROL_HZ < 1:
-        parser.error("--batch, --c-max-batch must be >= 1 and --seconds at least 0.1 s")
+    if (
+        min(args.batch + [args.c_max_batch, args.repeats]) < 1
+        or args.seconds * constants.CONTROL_HZ < 1
+    ):
+        parser.error("--batch, --c-max-batch, --repeats must be >= 1 and --seconds at least 0.1 s")
     if args.out.exists() and not args.out.is_dir():
         parser.error(f"--out {args.out} is a file, not a folder")
 
@@ -212,6 +222,7 @@ def main(argv: list[str] | None = None) -> int:
             "seconds": periods / constants.CONTROL_HZ,
             "domain": args.domain,
             "c_max_batch": args.c_max_batch,
+            "repeats": args.repeats,
             "accuracy_seeds": list(fidelity.BABBLE_SEEDS),
         },
         "rows": [],
@@ -233,7 +244,8 @@ def main(argv: list[str] | None = None) -> int:
         for name, rollout in backends.items():
             if name == "chain MuJoCo C" and batch > args.c_max_batch:
                 continue
-            timing = timed_rollout(rollout, commands, jitted=name != "chain MuJoCo C")
+            jitted = name != "chain MuJoCo C"
+            timing = timed_rollout(rollout, commands, jitted, args.repeats)
             row = {"backend": name, "batch": batch, **timing}
             result["rows"].append(row)
             print(
