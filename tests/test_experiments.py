@@ -430,13 +430,14 @@ def test_quick_chain_runs_end_to_end_then_skips_everything(tmp_path, capsys, mon
 
 
 def _state_pieces(tmp_path):
-    """(take(*args): runs a copy of experiments/take_state.sh on a device call's files, the
+    """(take(*args): runs a copy of tools/device/take_state.sh on a device call's files, the
     whole state's bytes, the folder of its pieces) for a run folder paper/ with one stage.json
     ({}); take_state.sh keeps the state in the copy's STATE_DIR .paper_state_rerun."""
     repo = tmp_path / "repo"
-    (repo / "experiments").mkdir(parents=True)
-    script = repo / "experiments" / "take_state.sh"
-    shutil.copy(paper.REPO / "experiments" / "take_state.sh", script)
+    (repo / "tools" / "device").mkdir(parents=True)
+    script = repo / "tools" / "device" / "take_state.sh"
+    for name in ("take_state.sh", "pieces.sh"):
+        shutil.copy(paper.REPO / "tools" / "device" / name, repo / "tools" / "device")
     (tmp_path / "paper").mkdir()
     (tmp_path / "paper" / "stage.json").write_text("{}")
     whole = tmp_path / "paper_state.tar.gz"
@@ -461,7 +462,7 @@ def _state_pieces(tmp_path):
 
 
 def test_take_state_keeps_a_second_runs_state_apart_and_refuses_a_bad_join(tmp_path):
-    """experiments/take_state.sh joins a device call's pieces into STATE_DIR only, leaving the
+    """tools/device/take_state.sh joins a device call's pieces into STATE_DIR only, leaving the
     first run's state as it was; pieces that do not match their sha256 change nothing."""
     take, blob, files_at = _state_pieces(tmp_path)
     repo = tmp_path / "repo"
@@ -500,13 +501,14 @@ def test_take_state_never_unpacks_over_a_run_folder(tmp_path):
 
 
 def test_state_cut_into_pieces_is_restored_on_the_device_once_every_piece_has_come(tmp_path):
-    """take_state.sh --pieces N cuts the kept state into N carryable folders; device.sh (RUN=0,
-    call by call, each carrying one piece) stages them, restores nothing until the last has
-    come, then restores the run folder; a piece that does not match the sha256 is refused."""
+    """take_state.sh --pieces N cuts the kept state into N carryable folders;
+    tools/device/chain.sh (RUN=0, call by call, each carrying one piece) stages them, restores
+    nothing until the last has come, then restores the run folder; a piece that does not match
+    the sha256 is refused."""
     take, blob, _ = _state_pieces(tmp_path)
     repo = tmp_path / "repo"
     assert take().returncode == 0  # keeps .paper_state_rerun/paper_state.tar.gz
-    script = repo / "experiments" / "take_state.sh"
+    script = repo / "tools" / "device" / "take_state.sh"
     env = os.environ | {"STATE_DIR": ".paper_state_rerun"}
     bad = subprocess.run(["bash", str(script), "--pieces", "x"], env=env, capture_output=True)
     assert bad.returncode == 2
@@ -520,11 +522,10 @@ def test_state_cut_into_pieces_is_restored_on_the_device_once_every_piece_has_co
     assert joined == blob
 
     device = tmp_path / "device"  # the copy of the tree on the GPU machine
-    (device / "experiments").mkdir(parents=True)
-    (device / "bench" / "device").mkdir(parents=True)
-    shutil.copy(paper.REPO / "experiments" / "device.sh", device / "experiments")
-    shutil.copy(paper.REPO / "bench" / "device" / "pieces.sh", device / "bench" / "device")
-    (device / "bench" / "device" / "install.sh").write_text(
+    (device / "tools" / "device").mkdir(parents=True)
+    for name in ("chain.sh", "pieces.sh"):
+        shutil.copy(paper.REPO / "tools" / "device" / name, device / "tools" / "device")
+    (device / "tools" / "device" / "install.sh").write_text(
         'TMP=$DEVICE_TMP; OUT=$TMP/out; PY=python3; mkdir -p "$OUT"\n'
     )
     env = os.environ | {"DEVICE_TMP": str(tmp_path / "tmp"), "RUN": "0",
@@ -533,7 +534,7 @@ def test_state_cut_into_pieces_is_restored_on_the_device_once_every_piece_has_co
     for i, piece in enumerate(pieces):
         shutil.copytree(piece, device / piece.name)
         call = subprocess.run(
-            ["bash", "experiments/device.sh"], cwd=device, env=env, capture_output=True, text=True
+            ["bash", "tools/device/chain.sh"], cwd=device, env=env, capture_output=True, text=True
         )
         assert call.returncode == 0, call.stderr
         shutil.rmtree(device / piece.name)  # the next call carries only its own piece
@@ -546,7 +547,7 @@ def test_state_cut_into_pieces_is_restored_on_the_device_once_every_piece_has_co
     parts = tmp_path / "tmp" / "state_parts"
     (parts / "paper_state.tar.gz.part-01").write_bytes(b"garbage")
     call = subprocess.run(
-        ["bash", "experiments/device.sh"], cwd=device, env=env, capture_output=True, text=True
+        ["bash", "tools/device/chain.sh"], cwd=device, env=env, capture_output=True, text=True
     )
     assert call.returncode == 1 and "do not match" in call.stdout
     assert not run_folder.exists()
