@@ -40,7 +40,8 @@ from mjx_arm.rollout_c import (  # noqa: F401  (re-exported)
 )
 
 #: jax_default_matmul_precision of every MJX physics step and of the MJX tracker
-#: (`mjx_precision`; None: JAX's default, TensorFloat32 on NVIDIA GPUs, for benchmarks).
+#: (`mjx_precision`; None: the caller's, by default JAX's: TensorFloat32 on NVIDIA GPUs, for
+#: benchmarks).
 MJX_MATMUL_PRECISION = "highest"
 
 

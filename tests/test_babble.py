@@ -91,7 +91,7 @@ def test_auto_backend_is_c_on_cpu():
 # ---------------------------------------------------------------------------------- rollouts
 
 
-def test_sharded_mjx_pads_and_agrees_with_c(arm):
+def test_sharded_mjx_pads_and_agrees_with_c(arm, capsys):
     """One device: a 3-program batch padded to 4, against MuJoCo C; chunked run is identical."""
     programs = babble_programs(CONFIG, np.arange(3))
     sharded = babble.ShardedRollout(arm)
@@ -113,6 +113,11 @@ def test_sharded_mjx_pads_and_agrees_with_c(arm):
     np.testing.assert_allclose(chunked, poses, atol=1e-6)
     # The arm moves: babbling reaches well beyond rest.
     assert np.ptp(poses_c[..., :2]) > 5e-3
+    # The one compile was announced on stderr before it ran, once.
+    line = (
+        f"compiling the sharded MJX rollout over 1 device(s) for batch 4 x {CONFIG.n_steps} steps"
+    )
+    assert capsys.readouterr().err.count(line) == 1
 
 
 def test_diverged_trajectories_are_reported():

@@ -239,19 +239,26 @@ class ShardedRollout:
 
     def compile(self, batch: int, n_steps: int):
         """Compiles for commands [batch, n_steps, 3]; returns the compiled executable."""
+        self._announce(batch, n_steps)
         spec = jax.ShapeDtypeStruct((batch, n_steps, 3), jnp.float32, sharding=self.batch_sharding)
         return self.fn.lower(self.mjx_model, self.rest, spec).compile()
 
     def run_device(self, commands: jax.Array) -> tuple[jax.Array, jax.Array]:
         """Runs sharded commands [B, T, 3] (B padded); returns device arrays, not waited on.
         The first call of a shape announces its compile on stderr (process 0 only)."""
+        self._announce(*commands.shape[:2])
+        return self.fn(self.mjx_model, self.rest, commands)
+
+    def _announce(self, batch: int, n_steps: int) -> None:
+        """The stderr line before the first compile of a shape (`mjx_arm.compile_notice`), on
+        process 0 only."""
         if jax.process_index() == 0:
             compile_notice.announce_compile(
-                (id(self.fn), commands.shape),
-                *commands.shape[:2],
+                (id(self.fn), (batch, n_steps, 3)),
+                batch,
+                n_steps,
                 what=f"the sharded MJX rollout over {self.n_devices} device(s)",
             )
-        return self.fn(self.mjx_model, self.rest, commands)
 
     def __call__(self, commands_bar: np.ndarray, size: int | None = None):
         n = commands_bar.shape[0]

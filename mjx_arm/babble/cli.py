@@ -234,16 +234,6 @@ COORDINATOR_ENV = ("JAX_COORDINATOR_ADDRESS", "SLURM_JOB_ID", "OMPI_MCA_orte_hnp
 def check_distributed_args(args: argparse.Namespace) -> None:
     """Raises ValueError unless the multi-process options are consistent (--distributed needs
     a coordinator: --coordinator, or one that JAX finds in `COORDINATOR_ENV`)."""
-    if (
-        args.distributed
-        and args.coordinator is None
-        and not any(os.environ.get(name) for name in COORDINATOR_ENV)
-    ):
-        raise ValueError(
-            "--distributed needs a coordinator: give --coordinator HOST:PORT with"
-            " --num-processes and --process-id, or run under SLURM / Open MPI, or set"
-            " JAX_COORDINATOR_ADDRESS"
-        )
     given = [
         f"--{name.replace('_', '-')}"
         for name in ("coordinator", "num_processes", "process_id")
@@ -260,6 +250,16 @@ def check_distributed_args(args: argparse.Namespace) -> None:
     if args.process_id is not None and args.process_id >= args.num_processes:
         raise ValueError(
             f"--process-id must be < --num-processes ({args.num_processes}), got {args.process_id}"
+        )
+    if (
+        args.distributed
+        and args.coordinator is None
+        and not any(os.environ.get(name) for name in COORDINATOR_ENV)
+    ):
+        raise ValueError(
+            "--distributed needs a coordinator: give --coordinator HOST:PORT with"
+            " --num-processes and --process-id, or run under SLURM / Open MPI, or set"
+            " JAX_COORDINATOR_ADDRESS"
         )
 
 
