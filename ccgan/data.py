@@ -477,20 +477,45 @@ def check_identities(d: DomainData, n_val: int, flag: str = "the files") -> None
                 " so held-out trajectories would be trained on; list each file once"
             )
         seen[digest] = path
-    n = d.pressures_bar.shape[0]
-    n_train = max(n - n_val, 0)
+    n_train = max(d.pressures_bar.shape[0] - n_val, 0)
+    check_unseen(d, n_val, d, flag, trained_rows=n_train)
 
-    def where(i: int) -> str:
-        f = int(np.searchsorted(starts, i, side="right")) - 1
-        return f"{d.paths[f]}[{i - starts[f]}]" if d.splits else f"trajectory {i}"
 
-    trained = {array_digest(d.pressures_bar[i], d.poses[i]): i for i in range(n_train)}
-    for i in range(n_train, n):
-        j = trained.get(array_digest(d.pressures_bar[i], d.poses[i]))
+def _trajectory_name(d: DomainData, i: int) -> str:
+    """`path[row]` of trajectory i of the concatenated files (or `trajectory i`)."""
+    if not d.splits:
+        return f"trajectory {i}"
+    starts = np.cumsum([0, *(n for _, n in d.splits)])
+    f = int(np.searchsorted(starts, i, side="right")) - 1
+    return f"{d.paths[f]}[{i - starts[f]}]"
+
+
+def check_unseen(
+    held: DomainData,
+    n_val: int,
+    trained: DomainData,
+    flag: str = "the files",
+    trained_rows: int | None = None,
+) -> None:
+    """Refuses when one of `held`'s last `n_val` trajectories (held out by `prepare`) has the
+    same arrays (`array_digest` of pressures and poses) as one of `trained`'s first
+    `trained_rows` (default: all of them), e.g. --forward-data that F_c trains on.
+
+    Raises:
+      mjx_arm.dataset.DatasetError: one line naming both trajectories (`path[row]`).
+    """
+    from mjx_arm.dataset import DatasetError
+
+    n_trained = trained.pressures_bar.shape[0] if trained_rows is None else trained_rows
+    seen = {array_digest(trained.pressures_bar[j], trained.poses[j]): j for j in range(n_trained)}
+    n = held.pressures_bar.shape[0]
+    for i in range(max(n - n_val, 0), n):
+        j = seen.get(array_digest(held.pressures_bar[i], held.poses[i]))
         if j is not None:
             raise DatasetError(
-                f"{flag}: held-out trajectory {where(i)} is also trained on: {where(j)} holds"
-                " the same arrays; hold out trajectories that training does not see"
+                f"{flag}: held-out trajectory {_trajectory_name(held, i)} is also trained on:"
+                f" {_trajectory_name(trained, j)} holds the same arrays; hold out trajectories"
+                " that training does not see"
             )
 
 

@@ -35,7 +35,7 @@ from ccgan.cli import (
     lock_output_dir,
 )
 from ccgan.config import FEEDBACK_IMPLS, K_CHOICE_PROGRAMS, TrainConfig, check_forward_config
-from ccgan.data import TranslationData, read_domain
+from ccgan.data import TranslationData, check_unseen, read_domain
 from ccgan.forward import ForwardConfig
 from ccgan.forward_stage import (  # noqa: F401
     FORWARD_FILES,
@@ -109,6 +109,10 @@ def forward_splits_from_args(parser, args, config: TrainConfig, data, d_s, d_c) 
             forward_c = read_domain(args.forward_data, "constrained", d_c.model_hash)
         except DatasetError as err:
             parser.error(f"--forward-data: {err}")
+        try:  # F_c is scored on the CCGAN's held-out D_c programs: it must not train on them
+            check_unseen(d_c, config.n_val, forward_c, "--forward-data")
+        except DatasetError as err:
+            parser.error(str(err))
         if forward_c.domain != d_c.domain:
             parser.error(
                 f"--forward-data holds domain {forward_c.domain!r}, --constrained {d_c.domain!r}"
@@ -219,13 +223,13 @@ def main(argv=None) -> None:
         check_data(config, data)
     except ValueError as err:
         parser.error(f"the data do not suit the options: {err}")
+    splits = forward_splits_from_args(parser, args, config, data, d_s, d_c)
     k_choice = None
     if config.k_choice == "simulator" and not args.forward_only:
         k_choice = simulator_choice_from_args(parser, args, config, data, d_c)
     enable_compilation_cache()
     workdir = Path(args.workdir)
     workdir.mkdir(parents=True, exist_ok=True)
-    splits = forward_splits_from_args(parser, args, config, data, d_s, d_c)
     f_meta = forward_meta(fconf, data, splits)
     fc_path = workdir / "forward_c.ckpt"
     if args.forward_from is not None:

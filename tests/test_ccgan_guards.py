@@ -664,6 +664,11 @@ def test_training_refuses_held_out_trajectories_it_trains_on(tmp_path, files, sm
     err = usage_error(tune.main, argv, capsys)
     assert err.startswith("--constrained") and "hold the same data" in err
     assert not (tmp_path / "r").exists()
+    # F_c trained on --forward-data is scored on the held-out D_c programs: none of them there.
+    argv = ["--source", files["s"], "--constrained", files["c"], *tiny, "--n-val", "1"]
+    err = usage_error(train_lib.main, [*argv, "--forward-data", files["c"]], capsys)
+    assert err.startswith("--forward-data: held-out trajectory") and "c.npz[3]" in err
+    assert not out.exists()
     # By content alone: the same arrays under another name and split are refused in the library.
     d_s, d_c = data_lib.read_translation_files([files["s"], copy_as_val], [files["c"]])
     with pytest.raises(DatasetError, match="hold the same data"):
