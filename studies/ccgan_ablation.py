@@ -186,7 +186,7 @@ def write_report(out: Path, report: dict) -> None:
 
 def main(argv=None) -> None:
     p = argparse.ArgumentParser(prog="python -m studies.ccgan_ablation", description=__doc__)
-    p.add_argument("--study-dir", required=True, help="a studies/ccgan_study.sh folder")
+    p.add_argument("--study-dir", required=True, help="a tools/device/ccgan_study.sh folder")
     p.add_argument("--label", required=True, help="this batch's name in the report")
     p.add_argument("--forward-c", default=None, help="F_c checkpoint (default: the study's)")
     p.add_argument("--gan-data", default=None, help="a babbling folder (MJX-scale data)")

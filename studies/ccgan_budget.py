@@ -59,7 +59,7 @@ def spearman(a, b) -> float:
 
 def main(argv=None) -> None:
     p = argparse.ArgumentParser(prog="python -m studies.ccgan_budget", description=__doc__)
-    p.add_argument("--study-dir", required=True, help="a studies/ccgan_study.sh folder")
+    p.add_argument("--study-dir", required=True, help="a tools/device/ccgan_study.sh folder")
     p.add_argument("--study-name", default="ccgan_paper_scale")
     p.add_argument("--batch", type=int, default=0, help="the stored batch whose trials to rerun")
     p.add_argument("--epochs", type=int, default=200)

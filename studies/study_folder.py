@@ -1,4 +1,4 @@
-"""The babbling and forward models of a `studies/ccgan_study.sh` folder, read once for a study.
+"""The babbling and forward models of a `tools/device/ccgan_study.sh` folder, read once for a study.
 
 A study folder holds `babble/` (the paper-scale babbling of both domains, `mjx_arm.babble`) and
 `forward/` (F_s and F_c, `ccgan.train --forward-only`). The studies that build on it
