@@ -231,7 +231,7 @@ def write_report(out: Path, summary: dict) -> None:
 
 def main(argv=None) -> None:
     p = argparse.ArgumentParser(prog="python -m studies.forward_data", description=__doc__)
-    p.add_argument("--study-dir", required=True, help="babble/ of a tools/device/ccgan_study.sh run")
+    p.add_argument("--study-dir", required=True, help="babble/ of a ccgan_study.sh run")
     p.add_argument("--data", nargs="*", default=[], metavar="NAME=FOLDER", help="babbling sets")
     p.add_argument("--runs", nargs="+", required=True, metavar="DATA:N:MODE:WINDOW")
     p.add_argument("--steps", type=int, default=4000, help="optimiser steps per F_c")
