@@ -52,7 +52,7 @@ MAX_COMMAND_BAR = 10.0
 
 #: The methods a translator file records ("method" in its metadata): `ccgan.train`'s CCGAN-GP
 #: and its WCGAN-GP baseline, and the stages that refine them in the simulator
-#: (`ccgan.finetune`; `ccgan.distill`: "distill" when it started from a CCGAN-GP translator,
+#: (the retired `ccgan.finetune`, whose files `eval` refuses; `ccgan.distill`: "distill" when it started from a CCGAN-GP translator,
 #: "distill_from_<method>" from another, whose file then records "started_from").
 METHODS = ("ccgan", "wcgan", "finetune", "distill", "distill_from_wcgan", "distill_from_finetune")
 #: What a translator file says it is, each a metadata key: its method, the domains it translates

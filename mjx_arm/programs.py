@@ -27,7 +27,7 @@ fine-tuning and validating translators; `validation_program` is the smooth progr
 evaluation picks its stretch factor on.
 
 The random step programs (random targets held for random times) live here too, one family each:
-  babble_program(s)     the babbling datasets (`mjx_arm.babble`, `ccgan.finetune`): each chamber
+  babble_program(s)     the babbling datasets (`mjx_arm.babble`): each chamber
                         switches on its own, one NumPy stream per (domain, split, trajectory)
   random_held_programs  all three chambers switch together, drawn one after another from one
                         generator (`ccgan`'s tests and synthetic data, `bench.train`); with

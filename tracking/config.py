@@ -1,7 +1,7 @@
 """Settings checks shared by every layer: one error type for a bad field, and its checks.
 
 The settings dataclasses (`tracking.oracle.OracleConfig`, `ccgan.train.TrainConfig`,
-`ccgan.finetune.FinetuneConfig`, `eval.pipeline.EvalConfig`, ...) check their fields in
+`ccgan.distill.DistillConfig`, `eval.pipeline.EvalConfig`, ...) check their fields in
 `__post_init__` and raise `ConfigError`, so the Python API and every command line refuse the
 same values, with messages "<field> <problem>". It lives here, at the lowest layer that has a
 settings class, so that every layer above raises and catches the same type.

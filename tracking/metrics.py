@@ -64,8 +64,8 @@ def orientation_error_rad(poses_pred, poses_target):
 def tracking_loss(poses_m, target_m, orientation_weight_cm_per_rad: float):
     """Per-program tracking loss [...]: mean over time of X_err_cm^2 + w^2 * 2 (1 - cos phi).
 
-    The objective of the oracle (`tracking.oracle`) and of the simulator fine-tune
-    (`ccgan.finetune`); `tracking.mpc.residuals` is its least-squares form.
+    The objective of the oracle (`tracking.oracle`) and of the retired simulator fine-tune
+    (`ccgan.finetune`, at commit 22875a2); `tracking.mpc.residuals` is its least-squares form.
 
     Args:
       poses_m, target_m: [..., T, 6] poses (tip position in m, then the unit d3 director).
