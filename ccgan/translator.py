@@ -52,8 +52,9 @@ MAX_COMMAND_BAR = 10.0
 
 #: The methods a translator file records ("method" in its metadata): `ccgan.train`'s CCGAN-GP
 #: and its WCGAN-GP baseline, and the stages that refine them in the simulator
-#: (the retired `ccgan.finetune`, whose files `eval` refuses; `ccgan.distill`: "distill" when it started from a CCGAN-GP translator,
-#: "distill_from_<method>" from another, whose file then records "started_from").
+#: (the retired `ccgan.finetune`, whose files `eval` refuses; `ccgan.distill`: "distill" when
+#: it started from a CCGAN-GP translator, "distill_from_<method>" from another, whose file then
+#: records "started_from").
 METHODS = ("ccgan", "wcgan", "finetune", "distill", "distill_from_wcgan", "distill_from_finetune")
 #: What a translator file says it is, each a metadata key: its method, the domains it translates
 #: from and into (mjx_arm.DOMAINS names: "source" -> "constrained" or "aged") and the
