@@ -10,6 +10,19 @@ import sys
 from pathlib import Path
 
 from mjx_arm.atomic import write_atomically
+from mjx_arm.run_folder import check_out
+
+
+def parse_checked(parser, argv: list[str] | None, prefix: bool = True):
+    """`parser.parse_args(argv)`, then `--out` checked before any work: with `prefix`, the
+    `.md` file the bench will write (`--out` names a prefix); else a folder it can write or make.
+    A usage error (exit 2) names `--out` otherwise, instead of a traceback after the timings."""
+    args = parser.parse_args(argv)
+    if prefix:
+        check_out(parser, "--out", f"{args.out}.md", file=True)
+    else:
+        check_out(parser, "--out", args.out)
+    return args
 
 
 def run_header(module: str, argv: list[str] | None) -> dict:

@@ -53,7 +53,7 @@ def measure(model: str, chunk: int, seconds: float) -> dict:
 
 def main(argv=None) -> None:
     """CLI: measure each --chunks size and write the table."""
-    from bench import run_header, write_results
+    from bench import parse_checked, run_header, write_results
     from mjx_arm.arm import C_CHUNK
 
     p = cli_parser("bench.c_chunk_memory", __doc__)
@@ -61,7 +61,7 @@ def main(argv=None) -> None:
     p.add_argument("--chunks", type=int, nargs="+", default=[64, C_CHUNK], help="chunk sizes")
     p.add_argument("--seconds", type=float, default=10.0, help="program length (s), >= 5")
     p.add_argument("--out", required=True, help="output prefix (writes .md and .json)")
-    a = p.parse_args(argv)
+    a = parse_checked(p, argv)
     if min(a.chunks) < 1 or a.seconds < 5:
         p.error("--chunks must be >= 1 and --seconds >= 5 (one whole 5 s slice)")
     header = run_header("bench.c_chunk_memory", argv)

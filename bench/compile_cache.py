@@ -100,7 +100,7 @@ def run_once(
 
 def main(argv=None) -> None:
     """CLI: run every --jobs job four times and write the table."""
-    from bench import run_header, write_results
+    from bench import parse_checked, run_header, write_results
 
     p = cli_parser("bench.compile_cache", __doc__)
     p.add_argument("--jobs", nargs="+", choices=JOBS, default=list(JOBS), help="jobs to time")
@@ -111,7 +111,7 @@ def main(argv=None) -> None:
         help="write programs that compile at least this long (default: the package's, 1 s)",
     )
     p.add_argument("--out", required=True, help="output prefix (writes .md and .json)")
-    a = p.parse_args(argv)
+    a = parse_checked(p, argv)
     header = run_header("bench.compile_cache", argv)
     header["cores"] = os.cpu_count()
     header["min_compile_time_s"] = (

@@ -22,7 +22,7 @@ import time
 import jax
 import numpy as np
 
-from bench import run_header, write_results
+from bench import parse_checked, run_header, write_results
 from ccgan import distill, load_translator
 from ccgan.cli import cli_parser
 
@@ -57,7 +57,7 @@ def main(argv=None) -> None:
     p.add_argument("--unrolls", type=int, nargs="+", default=[1, 5, 10, 25])
     p.add_argument("--repeats", type=int, default=20, help="timed steps per row (median kept)")
     p.add_argument("--out", required=True, help="output prefix (writes .md and .json)")
-    a = p.parse_args(argv)
+    a = parse_checked(p, argv)
     if min(a.unrolls + [a.seeds, a.batch, a.steps, a.repeats]) < 1:
         p.error("--unrolls, --seeds, --batch, --steps and --repeats must be >= 1")
     translators = [load_translator()] * a.seeds  # the chain's CCGAN-GP generator

@@ -38,7 +38,7 @@ import mujoco
 import numpy as np
 
 import mjx_arm
-from bench import run_header, write_results
+from bench import parse_checked, run_header, write_results
 from mjx_arm import constants, fidelity
 from mjx_arm.machine import usable_cores
 from mjx_arm.programs import bench_programs, held_program
@@ -204,7 +204,7 @@ def main(argv: list[str] | None = None) -> int:
         "--accuracy-seconds", type=float, default=fidelity.BABBLE_SECONDS, help="0 skips it"
     )
     parser.add_argument("--accuracy-domains", nargs="+", default=list(fidelity.DOMAINS))
-    args = parser.parse_args(argv)
+    args = parse_checked(parser, argv, prefix=False)
     if (
         min(args.batch + [args.c_max_batch, args.repeats]) < 1
         or args.seconds * constants.CONTROL_HZ < 1

@@ -27,7 +27,7 @@ from pathlib import Path
 
 import numpy as np
 
-from bench import run_header, write_results
+from bench import parse_checked, run_header, write_results
 from ccgan.cli import cli_parser
 
 
@@ -91,7 +91,7 @@ def main(argv=None) -> None:
     p.add_argument("--epochs", type=int, default=40, help="timed epochs per training")
     p.add_argument("--seeds", type=int, default=3, help="seeds vmapped in each training")
     p.add_argument("--out", required=True, help="output prefix (writes .json and .md)")
-    a = p.parse_args(argv)
+    a = parse_checked(p, argv)
     if min(a.jobs) != 1:
         p.error("--jobs must be positive and include 1, the reference")
     header = run_header("bench.sharing", argv)

@@ -28,7 +28,7 @@ import jax.numpy as jnp
 import numpy as np
 
 import mjx_arm
-from bench import run_header, write_results
+from bench import parse_checked, run_header, write_results
 from ccgan.cli import cli_parser
 
 
@@ -68,7 +68,7 @@ def main(argv=None) -> None:
     p.add_argument("--unrolls", type=int, nargs="+", default=[1, 5, 25], help="steps per loop")
     p.add_argument("--repeats", type=int, default=3, help="timed calls per row (best kept)")
     p.add_argument("--out", required=True, help="output prefix (writes .md and .json)")
-    a = p.parse_args(argv)
+    a = parse_checked(p, argv)
     if min(a.unrolls) < 1 or a.batch < 1 or a.periods < 1 or a.repeats < 1:
         p.error("--unrolls, --batch, --periods and --repeats must be >= 1")
     arm = mjx_arm.load(a.model, a.domain)

@@ -17,7 +17,7 @@ from __future__ import annotations
 import time
 
 import mjx_arm  # (before jax: sets the XLA CPU flag)
-from bench import run_header, write_results
+from bench import parse_checked, run_header, write_results
 from ccgan.cli import cli_parser
 from mjx_arm.machine import usable_cores
 from mjx_arm.programs import shape_like_programs
@@ -53,7 +53,7 @@ def main(argv=None) -> None:
         " each (0: the arm's own; others: `Arm.planning_copy`); every row is scored in the arm",
     )
     p.add_argument("--out", required=True, help="output prefix (writes .json and .md)")
-    a = p.parse_args(argv)
+    a = parse_checked(p, argv)
     if min(a.substeps) < 0:
         p.error("--substeps must be >= 0")
     if a.c_programs < 1 or min(a.mjx_programs) < a.c_programs:

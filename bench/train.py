@@ -23,7 +23,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from bench import run_header
+from bench import parse_checked, run_header
 from ccgan import checkpoint
 from ccgan import config as config_lib
 from ccgan import data as data_lib
@@ -292,7 +292,7 @@ def timings_section(args, config, data, fc_params, fwd, report: dict) -> list[st
 def main(argv=None) -> None:
     """Runs ``python -m bench.train`` with `argv` (default: sys.argv[1:]); writes
     ``<out>/<name>.json`` and ``.md`` (name: train or train_paper, then --tag)."""
-    args = build_parser().parse_args(argv)
+    args = parse_checked(build_parser(), argv, prefix=False)
     args.feedback_impls = [train_lib.resolved_feedback_impl(i) for i in args.feedback_impls]
 
     # The GPU step alone: k through F_c every 10 epochs inside the jitted epoch, as when the
