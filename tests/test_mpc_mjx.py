@@ -16,8 +16,10 @@ def arms():
     return mjx_arm.load(xml=xml, domain="source"), mjx_arm.load(xml=xml, domain="constrained")
 
 
-def test_mjx_tracker_plans_as_the_c_tracker(arms):
+def test_mjx_tracker_plans_as_the_c_tracker(arms, monkeypatch):
     arm_s, arm_c = arms
+    announced = []
+    monkeypatch.setattr(mpc_mjx, "announce_compile", lambda *a, **kw: announced.append(a[1:3]))
     k = 3
     programs = np.stack([circle(0.7), kite(0.7)])
     targets = arm_s.rollout(programs, backend="c")
@@ -25,6 +27,7 @@ def test_mjx_tracker_plans_as_the_c_tracker(arms):
     want, want_info = mpc.track(arm_c, targets, k, programs, cfg)
     # Chunks of 3 steps: the 7 steps end inside a padded chunk.
     got, info = mpc_mjx.track(arm_c, targets, k, programs, cfg, chunk_steps=3)
+    assert announced == [(2, 3)]  # the compile is announced once, with its batch and chunk
     assert got.shape == want.shape == (2, 7 * k, 3) and info["healthy"].all()
     blocks = got.reshape(2, 7, k, 3)
     np.testing.assert_array_equal(blocks, np.repeat(blocks[:, :, :1], k, axis=2))

@@ -29,6 +29,7 @@ import numpy as np
 from mjx_arm import arm as mjx_arm_arm
 from mjx_arm.arm import Arm
 from mjx_arm.atomic import write_atomically
+from mjx_arm.compile_notice import announce_compile
 from tracking.mpc import LINE_STEPS, MpcConfig, _batched
 
 #: Source steps per jitted call: each call's progress is shown, and the compile does not grow
@@ -287,6 +288,9 @@ def track(
                       total=n_chunks)  # fmt: skip
     first_chunk_s = 0.0
     healthy = carry[2]
+    announce_compile(
+        (id(advance), n_prog, chunk_steps), n_prog, chunk_steps, what="the MJX tracker's chunk"
+    )
     for c in chunks:
         part = slice(c * chunk_steps, (c + 1) * chunk_steps)
         carry, applied_c, cost_c, healthy = advance(
