@@ -68,8 +68,8 @@ METHOD_NAMES = {
     "ccgan": "CCGAN-GP",
     "ccgan_sim": "distilled",
     "wcgan": "WCGAN-GP",
-    "mpc": "MPC in the D_c simulator",
-    "oracle": "the oracle",
+    "mpc": "tracker",
+    "oracle": "oracle",
 }
 #: Other names a command line accepts for a method (--methods, --robust-methods).
 METHOD_ALIASES = {"distilled": "ccgan_sim"}

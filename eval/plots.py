@@ -24,16 +24,8 @@ COLORS = {
     "mpc": "tab:gray",
     "oracle": "black",
 }
-LABELS = {
-    "target": "target (D_s)",
-    "none": "untranslated",
-    "stretch": "stretch",
-    "ccgan": "CCGAN-GP",
-    "ccgan_sim": METHOD_NAMES["ccgan_sim"],
-    "wcgan": "WCGAN-GP",
-    "mpc": "MPC (D_c sim)",
-    "oracle": "oracle",
-}
+#: Legend and panel labels: each method's one name (`eval.methods.METHOD_NAMES`).
+LABELS = {"target": "target (D_s)", **METHOD_NAMES}
 
 
 def save(fig, path: Path, mark: str | None = None) -> None:

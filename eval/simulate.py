@@ -20,6 +20,7 @@ from tqdm import tqdm
 
 import mjx_arm  # (before jax: sets the XLA CPU flag)
 from eval.methods import (
+    METHOD_NAMES,
     TranslatorMethod,
     forward_model,
     method_commands,
@@ -379,7 +380,8 @@ def score(plan: Plan, commands_of: dict, poses_of: dict, oracle_out: dict, log) 
             row["x_err_pct_of_excursion"] = 100.0 * row["x_err_cm_mean"] / excursion_cm
         table[shape], trajectories[shape] = rows, traj
         errors = (
-            f"{m} {r['x_err_cm_mean']:.3f} cm / {r['phi_err_rad_mean']:.3f} rad"
+            f"{METHOD_NAMES.get(m, m)} {r['x_err_cm_mean']:.3f} cm"
+            f" / {r['phi_err_rad_mean']:.3f} rad"
             for m, r in rows.items()
         )
         log(f"{shape}: " + ", ".join(errors))

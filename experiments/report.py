@@ -239,7 +239,7 @@ README_METHODS = (
     ("ccgan", "CCGAN-GP"),
     ("wcgan", "WCGAN-GP"),
     ("ccgan_sim", METHOD_NAMES["ccgan_sim"]),
-    ("mpc", "tracker"),
+    ("mpc", METHOD_NAMES["mpc"]),
     ("oracle", "oracle, first 2 s"),
 )
 
