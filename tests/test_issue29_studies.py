@@ -144,6 +144,7 @@ STUDY_ARGS = {
     "oracle_start": [],
     "planning_arm": [],
     "program_length": [],
+    "rod_shapes": [],
     "stretch_k": [],
     "teacher_settings": [],
     "timestep": [],
