@@ -48,6 +48,7 @@ def study_folder(tmp_path_factory, small_xml):
     return folder, model
 
 
+@pytest.mark.slow
 def test_forward_data_and_the_ablation_run_end_to_end(study_folder, tmp_path, capsys):
     folder, model = study_folder
     out = tmp_path / "fdata"

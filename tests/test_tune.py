@@ -47,6 +47,7 @@ def _argv(folder, tmp_path, db):
     ]  # fmt: skip
 
 
+@pytest.mark.slow
 def test_tiny_study_in_batches_scores_in_the_simulator_and_resumes(small_arm_files, tmp_path):
     db = tmp_path / "study" / "tune.db"
     argv = _argv(small_arm_files, tmp_path, db)
