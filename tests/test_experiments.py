@@ -2,14 +2,12 @@
 
 from __future__ import annotations
 
-import hashlib
 import importlib
 import json
 import os
 import shlex
 import shutil
 import subprocess
-import tarfile
 import textwrap
 import time
 
@@ -427,130 +425,6 @@ def test_quick_chain_runs_end_to_end_then_skips_everything(tmp_path, capsys, mon
     capsys.readouterr()
     assert paper.main(argv) == 0
     assert capsys.readouterr().out.count("skipped") == len(stages)
-
-
-def _state_pieces(tmp_path):
-    """(take(*args): runs a copy of tools/device/take_state.sh on a device call's files, the
-    whole state's bytes, the folder of its pieces) for a run folder paper/ with one stage.json
-    ({}); take_state.sh keeps the state in the copy's STATE_DIR .paper_state_rerun."""
-    repo = tmp_path / "repo"
-    (repo / "tools" / "device").mkdir(parents=True)
-    script = repo / "tools" / "device" / "take_state.sh"
-    for name in ("take_state.sh", "pieces.sh"):
-        shutil.copy(paper.REPO / "tools" / "device" / name, repo / "tools" / "device")
-    (tmp_path / "paper").mkdir()
-    (tmp_path / "paper" / "stage.json").write_text("{}")
-    whole = tmp_path / "paper_state.tar.gz"
-    with tarfile.open(whole, "w:gz") as tar:
-        tar.add(tmp_path / "paper", arcname="paper")
-    blob = whole.read_bytes()
-    files_at = tmp_path / "files"
-    files_at.mkdir()
-    half = len(blob) // 2
-    (files_at / "paper_state.tar.gz.part-00").write_bytes(blob[:half])
-    (files_at / "paper_state.tar.gz.part-01").write_bytes(blob[half:])
-    digest = hashlib.sha256(blob).hexdigest()
-    (files_at / "paper_state.sha256").write_text(f"{digest}  paper_state.tar.gz\n")
-    env = os.environ | {"STATE_DIR": ".paper_state_rerun"}
-
-    def take(*args):
-        return subprocess.run(
-            ["bash", str(script), str(files_at), *args], env=env, capture_output=True, text=True
-        )
-
-    return take, blob, files_at
-
-
-def test_take_state_keeps_a_second_runs_state_apart_and_refuses_a_bad_join(tmp_path):
-    """tools/device/take_state.sh joins a device call's pieces into STATE_DIR only, leaving the
-    first run's state as it was; pieces that do not match their sha256 change nothing."""
-    take, blob, files_at = _state_pieces(tmp_path)
-    repo = tmp_path / "repo"
-    first = repo / ".paper_state" / "paper_state.tar.gz"
-    first.parent.mkdir()
-    first.write_bytes(b"the first run")
-    half = len(blob) // 2
-    done = take(str(tmp_path / "unpacked"))
-    assert done.returncode == 0, done.stderr
-    assert (repo / ".paper_state_rerun" / "paper_state.tar.gz").read_bytes() == blob
-    assert (tmp_path / "unpacked" / "paper" / "stage.json").read_text() == "{}"
-    assert first.read_bytes() == b"the first run"
-    (files_at / "paper_state.tar.gz.part-01").write_bytes(blob[half:] + b"x")
-    bad = take()
-    assert bad.returncode == 1 and "does not match" in bad.stderr
-    assert (repo / ".paper_state_rerun" / "paper_state.tar.gz").read_bytes() == blob
-
-
-def test_take_state_never_unpacks_over_a_run_folder(tmp_path):
-    """An older state unpacked where a run folder already is: refused before anything changes,
-    the newer folder (and a user's file in it) as it was, the state not even kept."""
-    take, _, _ = _state_pieces(tmp_path)
-    newer = tmp_path / "unpacked" / "paper"
-    (newer / "table").mkdir(parents=True)
-    (newer / "table" / "stage.json").write_text('{"newer": true}')
-    (newer / "notes.txt").write_text("mine")
-    refused = take(str(tmp_path / "unpacked"))
-    assert refused.returncode == 1
-    assert "paper exists" in refused.stderr and "does not unpack over" in refused.stderr
-    assert sorted(p.name for p in newer.iterdir()) == ["notes.txt", "table"]
-    assert (newer / "table" / "stage.json").read_text() == '{"newer": true}'
-    assert not (tmp_path / "repo" / ".paper_state_rerun").exists()
-    done = take(str(tmp_path / "elsewhere"))  # beside it, on request
-    assert done.returncode == 0, done.stderr
-    assert (tmp_path / "elsewhere" / "paper" / "stage.json").read_text() == "{}"
-
-
-def test_state_cut_into_pieces_is_restored_on_the_device_once_every_piece_has_come(tmp_path):
-    """take_state.sh --pieces N cuts the kept state into N carryable folders;
-    tools/device/chain.sh (RUN=0, call by call, each carrying one piece) stages them, restores
-    nothing until the last has come, then restores the run folder; a piece that does not match
-    the sha256 is refused."""
-    take, blob, _ = _state_pieces(tmp_path)
-    repo = tmp_path / "repo"
-    assert take().returncode == 0  # keeps .paper_state_rerun/paper_state.tar.gz
-    script = repo / "tools" / "device" / "take_state.sh"
-    env = os.environ | {"STATE_DIR": ".paper_state_rerun"}
-    bad = subprocess.run(["bash", str(script), "--pieces", "x"], env=env, capture_output=True)
-    assert bad.returncode == 2
-    cut = subprocess.run(
-        ["bash", str(script), "--pieces", "3"], env=env, capture_output=True, text=True
-    )
-    assert cut.returncode == 0, cut.stderr
-    pieces = sorted(repo.glob(".paper_state_rerun_part*"))
-    assert [p.name[-1] for p in pieces] == ["1", "2", "3"]
-    joined = b"".join(next(p.glob("*.part-*")).read_bytes() for p in pieces)
-    assert joined == blob
-
-    device = tmp_path / "device"  # the copy of the tree on the GPU machine
-    (device / "tools" / "device").mkdir(parents=True)
-    for name in ("chain.sh", "pieces.sh"):
-        shutil.copy(paper.REPO / "tools" / "device" / name, device / "tools" / "device")
-    (device / "tools" / "device" / "install.sh").write_text(
-        'TMP=$DEVICE_TMP; OUT=$TMP/out; PY=python3; mkdir -p "$OUT"\n'
-    )
-    env = os.environ | {"DEVICE_TMP": str(tmp_path / "tmp"), "RUN": "0",
-                        "STATE_DIR": ".paper_state_rerun"}  # fmt: skip
-    run_folder = tmp_path / "tmp" / "paper"
-    for i, piece in enumerate(pieces):
-        shutil.copytree(piece, device / piece.name)
-        call = subprocess.run(
-            ["bash", "tools/device/chain.sh"], cwd=device, env=env, capture_output=True, text=True
-        )
-        assert call.returncode == 0, call.stderr
-        shutil.rmtree(device / piece.name)  # the next call carries only its own piece
-        if i < 2:
-            assert f"{i + 1} of 3" in call.stdout and not run_folder.exists()
-    assert "restored" in call.stdout
-    assert (run_folder / "stage.json").read_text() == "{}"
-
-    shutil.rmtree(run_folder)
-    parts = tmp_path / "tmp" / "state_parts"
-    (parts / "paper_state.tar.gz.part-01").write_bytes(b"garbage")
-    call = subprocess.run(
-        ["bash", "tools/device/chain.sh"], cwd=device, env=env, capture_output=True, text=True
-    )
-    assert call.returncode == 1 and "do not match" in call.stdout
-    assert not run_folder.exists()
 
 
 def test_compare_runs_names_equal_and_differing_outputs_and_each_seeds_held_out_number(
