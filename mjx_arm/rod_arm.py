@@ -47,6 +47,9 @@ DTYPES = ("float64", "float32")
 #: Largest tip difference (fraction of L) allowed between `RodArm` in float64 and the committed
 #: reference path (`cosserat.rollout`) by `python -m mjx_arm.rod_check` and the tests.
 AGREEMENT_FRACTION_OF_L = 1e-6
+#: Physics steps per loop iteration by JAX backend when `RodArm.unroll` is None
+#: (bench/results/h200/rod_unroll: 10 gives 1.25-1.36x at batches 1-512 on one H200).
+DEFAULT_UNROLL = {"gpu": 10, "cpu": 1}
 
 
 def rod_params(
@@ -84,11 +87,15 @@ def rod_params(
 
 
 @functools.lru_cache(maxsize=16)
-def _batched_rollout(params: CosseratParams, dtype: str, valve_params: valve.ValveParams):
+def _batched_rollout(
+    params: CosseratParams, dtype: str, valve_params: valve.ValveParams, unroll: int = 1
+):
     """jit(vmap(rollout_single)) of one rod in `dtype`: commands [B, T, 3] -> poses [B, T, 6]."""
     rod = make_rod(params).astype(dtype)
     rest = RodState(*(np.asarray(a, dtype) for a in cosserat.rest_state(params)))
-    bound = functools.partial(rollout_single, rod, params.n_substeps, valve_params, rest)
+    bound = functools.partial(
+        rollout_single, rod, params.n_substeps, valve_params, rest, unroll=unroll
+    )
 
     def single(commands):
         # Full float32 products: JAX's default lets XLA use TensorFloat32 (a 10-bit mantissa) for
@@ -109,16 +116,25 @@ class RodArm:
       domain: the domain it was made for.
       dtype: "float64" (default: the reference, to rounding) or "float32" (faster, less exact).
       valve: the valve constants, the chain's defaults (`mjx_arm.valve.ValveParams`).
+      unroll: physics steps per iteration of the compiled step loop (the same arithmetic, to
+        1e-15 of L). None: `DEFAULT_UNROLL` for the default JAX backend, measured by
+        `bench.rod_unroll` (bench/results/h200/rod_unroll: 1.3x at batches 64-512 on one H200 at
+        10; on a 2-core CPU unrolling made it 1.6-2.4x slower).
     """
 
     params: CosseratParams
     domain: domains.Domain
     dtype: str = "float64"
     valve: valve.ValveParams = valve.ValveParams()
+    unroll: int | None = None
 
     def __post_init__(self):
         if self.dtype not in DTYPES:
             raise ValueError(f"dtype must be one of {DTYPES}, got {self.dtype!r}")
+        if self.unroll is not None and (
+            isinstance(self.unroll, bool) or not isinstance(self.unroll, int) or self.unroll < 1
+        ):
+            raise ValueError(f"unroll must be None or an int >= 1, got {self.unroll!r}")
         self.params.validate()
         valve.check(self.valve)
 
@@ -146,7 +162,8 @@ class RodArm:
         Commands must already be in `dtype` (float64 ones need `jax.enable_x64(True)` around the
         call); no checks are made. `rollout` is the checked entry point.
         """
-        return _batched_rollout(self.params, self.dtype, self.valve)
+        unroll = self.unroll or DEFAULT_UNROLL.get(jax.default_backend(), 1)
+        return _batched_rollout(self.params, self.dtype, self.valve, unroll)
 
     def rollout(self, pressures_bar) -> np.ndarray:
         """Simulates pressure programs from rest and returns the tip pose after each command.

@@ -146,8 +146,15 @@ def rollout_single(
     valve_params: valve.ValveParams,
     rest: RodState,
     commands_bar: jnp.ndarray,
+    unroll: int = 1,
 ) -> jnp.ndarray:
-    """Commands [T, 3] (bar) -> poses [T, 6], read at the end of each control period."""
+    """Commands [T, 3] (bar) -> poses [T, 6], read at the end of each control period.
+
+    `unroll`: physics steps per iteration of the compiled loop over a period's `n_substeps`
+    (`jax.lax.scan`'s unroll; the same arithmetic, fewer loop iterations). On a GPU a rod step is
+    a few small kernels, so the loop's own overhead per iteration dominates at small batches
+    (`bench.rod_unroll` measures it).
+    """
     commands = valve.saturate(commands_bar, valve_params)
     zero = jnp.zeros(3, commands.dtype)
 
@@ -157,7 +164,7 @@ def rollout_single(
     def control_step(carry, command):
         st, pressure = carry
         pressures = valve.substep_pressures(pressure, command, n_substeps, rod.dt, valve_params)
-        st, _ = jax.lax.scan(physics_step, st, pressures)
+        st, _ = jax.lax.scan(physics_step, st, pressures, unroll=unroll)
         st = st._replace(q=rotations.orthonormalise(st.q))
         return (st, pressures[-1]), tip_pose(st)
 

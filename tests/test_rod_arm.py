@@ -122,7 +122,25 @@ def test_bad_programs_are_refused_before_simulating(source_rod, bad, message):
         source_rod.rollout(bad)
 
 
+def test_unrolling_the_step_loop_changes_nothing(source_rod, programs):
+    unrolled = dataclasses.replace(source_rod, unroll=5).rollout(programs)
+    np.testing.assert_allclose(unrolled, source_rod.rollout(programs), rtol=0, atol=1e-12)
+
+
+def test_unroll_bench_writes_its_table(tmp_path):
+    from bench import rod_unroll
+
+    argv = ["--out", str(tmp_path), "--batch", "1", "--unroll", "1", "2", "--seconds", "0.2"]
+    rod_unroll.main(argv + ["--repeats", "1"])
+    stored = json.loads((tmp_path / "rod_unroll.json").read_text())
+    assert [(r["batch"], r["unroll"]) for r in stored["rows"]] == [(1, 1), (1, 2)]
+    assert stored["rows"][1]["largest_tip_difference_of_L"] < 1e-12
+    assert "| 1 | 2 | " in (tmp_path / "rod_unroll.md").read_text()
+
+
 def test_bad_settings_are_refused():
+    with pytest.raises(ValueError, match="unroll"):
+        dataclasses.replace(mjx_arm.load_rod("source"), unroll=0)
     with pytest.raises(ValueError, match="dtype"):
         mjx_arm.load_rod("source", dtype="float16")
     with pytest.raises(ValueError, match="unknown domain"):
@@ -157,7 +175,7 @@ def test_the_agreement_command_fails_above_1e_6_of_l(monkeypatch, capsys, differ
 
 
 def test_a_diverged_trajectory_is_reported(monkeypatch, source_rod, programs):
-    def diverging(params, dtype, valve_params):
+    def diverging(params, dtype, valve_params, unroll):
         def run(commands):
             poses = np.zeros(commands.shape[:2] + (6,))
             poses[1, 3:] = np.nan  # trajectory 1 from period 3 on
