@@ -31,6 +31,7 @@ from __future__ import annotations
 
 import dataclasses
 import functools
+import hashlib
 
 import jax
 import jax.numpy as jnp
@@ -116,6 +117,9 @@ class RodArm:
       domain: the domain it was made for.
       dtype: "float64" (default: the reference, to rounding) or "float32" (faster, less exact).
       valve: the valve constants, the chain's defaults (`mjx_arm.valve.ValveParams`).
+      model_hash: "rod-" and 16 hex digits of sha256 over the arm's physical values and the
+        element count, the same in every domain (as `Arm.model_hash` is one MJCF's): what a
+        translator trained on the rod's data records as its arm.
       unroll: physics steps per iteration of the compiled step loop (the same arithmetic, to
         1e-15 of L). None: `DEFAULT_UNROLL` for the default JAX backend, measured by
         `bench.rod_unroll` (bench/results/h200/rod_unroll: 1.3x at batches 64-512 on one H200 at
@@ -127,6 +131,7 @@ class RodArm:
     dtype: str = "float64"
     valve: valve.ValveParams = valve.ValveParams()
     unroll: int | None = None
+    model_hash: str = ""
 
     def __post_init__(self):
         if self.dtype not in DTYPES:
@@ -219,6 +224,10 @@ def load_rod(
       ValueError: an unknown domain or dtype, a `Domain` with `viscosity` set, or a rod that is
         unstable at its timestep (`CosseratParams.validate`).
     """
+    digest = hashlib.sha256(f"{arm!r} n_elements={n_elements}".encode()).hexdigest()[:16]
     return RodArm(
-        params=rod_params(domain, arm, n_elements), domain=domains.resolve(domain), dtype=dtype
+        params=rod_params(domain, arm, n_elements),
+        domain=domains.resolve(domain),
+        dtype=dtype,
+        model_hash=f"rod-{digest}",
     )

@@ -122,6 +122,13 @@ def test_bad_programs_are_refused_before_simulating(source_rod, bad, message):
         source_rod.rollout(bad)
 
 
+def test_the_rod_names_one_arm_in_every_domain():
+    hashes = {mjx_arm.load_rod(d).model_hash for d in ("source", "constrained", "aged")}
+    assert len(hashes) == 1 and hashes.pop().startswith("rod-")
+    softer = dataclasses.replace(ArmParams(), length_m=0.21)
+    assert mjx_arm.load_rod("source", arm=softer).model_hash != mjx_arm.load_rod().model_hash
+
+
 def test_unrolling_the_step_loop_changes_nothing(source_rod, programs):
     unrolled = dataclasses.replace(source_rod, unroll=5).rollout(programs)
     np.testing.assert_allclose(unrolled, source_rod.rollout(programs), rtol=0, atol=1e-12)
