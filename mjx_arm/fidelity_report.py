@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import math
 
-from mjx_arm import fitted
+from mjx_arm import fidelity_shapes, fitted
 
 
 def _damper_drag_words(cosserat: dict) -> str:
@@ -233,5 +233,7 @@ def to_markdown(results: dict) -> str:
     lines += _segment_lines(results)
     lines += _stability_lines(results)
     lines += _statics_lines(results)
+    if results.get("shapes"):
+        lines += fidelity_shapes.shapes_lines(results["shapes"])
     lines += ["", f"Arm length {length * 100:g} cm."]
     return "\n".join(lines) + "\n"

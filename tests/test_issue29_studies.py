@@ -145,7 +145,6 @@ STUDY_ARGS = {
     "oracle_start": [],
     "planning_arm": [],
     "program_length": [],
-    "rod_shapes": [],
     "stretch_k": [],
     "teacher_settings": [],
     "timestep": [],

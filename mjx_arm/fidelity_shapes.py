@@ -1,30 +1,24 @@
 """The chain against the reference rod on the five shapes' programs, untranslated, in D_s and D_c.
 
-`results/fidelity.md` measures the chain against the rod on held-out babbling; the five shapes
-are the programs every table is scored on, so how far the chain is from the rod on them says how
-far a table scored in the chain can be from one scored in the paper's kind of simulator. Each
-shape's D_s program (60 s, 600 commands at 10 Hz) runs from rest in both arms in each domain,
-with no translation and no hold: nothing is trained, tuned or chosen here.
-
-    python -m studies.rod_shapes --out studies/results/cpu/rod_shapes
-
-Writes rod_shapes.md and rod_shapes.json. Per shape and domain: the tip RMS and largest
-difference between the chain (MuJoCo C) and the rod (`mjx_arm.load_rod`, float64), in cm and as
-a fraction of the arm's length, and the rod's RMS tip excursion from its rest for scale.
+The fidelity report's babbling programs measure the chain against the rod on held-out data; the
+five shapes are the programs every table is scored on, so how far the chain is from the rod on
+them says how far a table scored in the chain can be from one scored in the paper's kind of
+simulator (`eval.shapes --simulator rod`). Each shape's D_s program (60 s, 600 commands at 10 Hz)
+runs from rest in both arms in each domain, with no translation and no hold: nothing is trained,
+tuned or chosen here. A section of `python -m mjx_arm.fidelity` (`--only shapes` recomputes just
+this section into an existing report: about 30 s on one CPU core, against the report's 15 min).
 """
 
 from __future__ import annotations
 
-import argparse
 import time
 
 import numpy as np
 
-import mjx_arm  # (before jax: sets the XLA CPU flag)
-from bench import run_header, write_results
 from mjx_arm import programs
+from mjx_arm.arm import load
 from mjx_arm.model_gen import ArmParams
-from studies.checks import parse_checked_args
+from mjx_arm.rod_arm import load_rod
 
 #: The domains both arms model the same way (`mjx_arm.rod_arm` maps them).
 DOMAINS = ("source", "constrained")
@@ -42,8 +36,12 @@ def rms_excursion(poses: np.ndarray, rest_tip: np.ndarray) -> float:
     return float(np.sqrt(np.mean(np.sum((poses[:, :3] - rest_tip) ** 2, axis=-1))))
 
 
-def run(duration_s: float = 60.0, log=print) -> dict:
-    """{domain: {shape: row}} of the chain against the rod on the shapes' programs."""
+def shape_comparison(duration_s: float = 60.0, log=print) -> dict:
+    """{"duration_s", "arm_length_m", "table": {domain: {shape: row}}}: per shape and domain the
+    tip RMS and largest difference between the chain (MuJoCo C, the committed model) and the rod
+    (float64) in cm and as a fraction of L, and the rod's RMS tip excursion from rest."""
+    if not duration_s > 0:
+        raise ValueError(f"duration_s must be > 0, got {duration_s}")
     length_m = ArmParams().length_m
     shapes = {name: make(duration_s) for name, make in programs.SHAPES.items()}
     batch = np.stack(list(shapes.values()))
@@ -51,9 +49,8 @@ def run(duration_s: float = 60.0, log=print) -> dict:
     table = {}
     for domain in DOMAINS:
         t0 = time.perf_counter()
-        chain = mjx_arm.load(domain=domain)
-        rod = mjx_arm.load_rod(domain)
-        chain_poses = chain.rollout(batch, backend="c")
+        chain_poses = load(domain=domain).rollout(batch, backend="c")
+        rod = load_rod(domain)
         rod_poses = rod.rollout(batch)
         rod_rest = rod.rollout(rest_program)[0, -1, :3]
         table[domain] = {}
@@ -67,16 +64,19 @@ def run(duration_s: float = 60.0, log=print) -> dict:
                 "rod_rms_excursion_cm": excursion * CM,
                 "tip_rms_of_excursion": rms / excursion,
             }
-        log(f"{domain}: {len(shapes)} shapes in {time.perf_counter() - t0:.1f} s")
+        log(f"shapes, {domain}: {len(shapes)} programs in {time.perf_counter() - t0:.1f} s")
     return {"duration_s": duration_s, "arm_length_m": length_m, "table": table}
 
 
-def report_lines(result: dict) -> list[str]:
-    """The markdown body: one table, a row per shape and domain."""
+def shapes_lines(result: dict) -> list[str]:
+    """The report's section: one table, a row per shape and domain."""
     lines = [
         "",
+        "## The five shapes' programs (chain against rod)",
+        "",
         f"Each shape's D_s program ({result['duration_s']:.0f} s), untranslated, from rest in"
-        " both arms; the chain in MuJoCo C, the rod (`mjx_arm.load_rod`) in float64.",
+        " both arms; the chain in MuJoCo C, the rod (`mjx_arm.load_rod`) in float64. The tables"
+        " scored in the chain can differ from the same tables scored in the rod by about this.",
         "",
         "| domain | shape | tip RMS cm | % of L | largest cm | rod's RMS excursion cm"
         " | RMS / excursion |",
@@ -90,25 +90,3 @@ def report_lines(result: dict) -> list[str]:
                 f" | {row['rod_rms_excursion_cm']:.2f} | {100 * row['tip_rms_of_excursion']:.0f}% |"
             )
     return lines
-
-
-def main(argv: list[str] | None = None) -> None:
-    parser = argparse.ArgumentParser(prog="python -m studies.rod_shapes", description=__doc__)
-    parser.add_argument("--out", required=True, help="folder for rod_shapes.md and .json")
-    parser.add_argument("--seconds", type=float, default=60.0, help="program length (s)")
-    args = parse_checked_args(parser, argv)
-    if not args.seconds > 0:
-        parser.error(f"--seconds must be > 0, got {args.seconds}")
-    result = run(args.seconds)
-    path = write_results(
-        f"{args.out}/rod_shapes",
-        run_header("studies.rod_shapes", argv),
-        result,
-        "The chain against the reference rod on the five shapes",
-        report_lines(result),
-    )
-    print(f"wrote {path}")
-
-
-if __name__ == "__main__":
-    main()
