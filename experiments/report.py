@@ -14,6 +14,17 @@ from experiments.stages import Chain, digest, shown_command
 
 #: The stages whose shapes.json the report reads: the D_c medium, and the aged arm.
 TABLE_STAGE, AGED_TABLE_STAGE = "table", "table_aged"
+#: The same tables scored in the reference rod (`eval.shapes --simulator rod`).
+ROD_TABLE_STAGE, ROD_AGED_TABLE_STAGE = "rod_table", "rod_table_aged"
+#: Column names of the rod's tables: which arm each method learnt or planned on.
+ROD_NAMES = {
+    "ccgan": "CCGAN-GP (rod's data)",
+    "wcgan": "WCGAN-GP (rod's data)",
+    "ccgan_sim": "distilled (chain's)",
+    "mpc": "tracker (planned in the chain)",
+}
+#: Above this ratio of rod to chain X_err the docs must say why a translator lost it (issue text).
+ROD_LOSS_FLAG = 1.5
 #: Translators that need no simulator when they translate.
 TRANSLATORS = ("ccgan", "ccgan_sim", "wcgan")
 
@@ -244,18 +255,19 @@ README_METHODS = (
 )
 
 
-def readme_tables(results: dict) -> list[str]:
+def readme_tables(results: dict, names: dict[str, str] | None = None) -> list[str]:
     """The README's tables of a chain's evaluation stage (`results`: its shapes.json content).
 
     The first gives each method's X_err (cm) / phi_err (rad) means with its k, beside the
     paper's Table I (CCGAN-GP, cm / rad) where the arm is D_c's; the second, each error as a
     percentage of the shape's tip excursion. Methods the stage did not run are left out, so the
     aged arm's table has its three columns. `tests/test_readme.py` checks that the README holds
-    these lines for the committed run.
+    these lines for the committed run. `names` overrides column headers by method (the rod's
+    tables: `ROD_NAMES`).
     """
     table = results["table"]
     shapes = list(table)
-    methods = [(m, h) for m, h in README_METHODS if m in table[shapes[0]]]
+    methods = [(m, (names or {}).get(m, h)) for m, h in README_METHODS if m in table[shapes[0]]]
     k = {m: table[shapes[0]][m]["k"] for m, _ in methods}
     paper = results["config"].get("target_domain", "constrained") == "constrained"
     head = [f"{h} (k = {k[m]})" if m != "none" else h for m, h in methods]
@@ -285,6 +297,52 @@ def readme_tables(results: dict) -> list[str]:
     return lines
 
 
+def rod_lines(rod: dict, chain_results: dict | None, rod_aged: dict | None = None) -> list[str]:
+    """The targets of the tables scored in the rod, shape by shape, and what going from the
+    chain to the rod costs each method scored in both (X_err in the rod / in the chain)."""
+    table, methods = rod["table"], rod["methods_run"]
+    shapes = list(table)
+
+    def x(m, s, t=table):
+        return t[s][m]["x_err_cm_mean"]
+
+    lines = []
+    if {"ccgan", "wcgan", "none"} <= set(methods):
+        lines.append(
+            "- CCGAN-GP (rod's data) below WCGAN-GP (rod's data) and below untranslated: "
+            + _count(shapes, lambda s: x("ccgan", s) < min(x("wcgan", s), x("none", s)))
+        )
+        lines.append(
+            "- CCGAN-GP (rod's data) at most the paper's CCGAN-GP error: "
+            + _count(shapes, lambda s: x("ccgan", s) <= PAPER_TABLE_I[s]["ccgan"][0])
+        )
+    if "stretch" in methods:
+        for m in (m for m in ("ccgan", "ccgan_sim", "mpc") if m in methods):
+            ratios = [x(m, s) / x("stretch", s) for s in shapes]
+            lines.append(
+                f"- {ROD_NAMES[m]} / stretch only in the rod: {min(ratios):.2f}-{max(ratios):.2f}"
+            )
+    if chain_results is not None:
+        both = [m for m in ("none", "stretch", "ccgan_sim", "mpc") if m in methods]
+        both = [m for m in both if m in chain_results["methods_run"]]
+        for m in both:
+            ratios = {s: x(m, s) / x(m, s, chain_results["table"]) for s in shapes}
+            over = [s for s, r in ratios.items() if r > ROD_LOSS_FLAG]
+            lines.append(
+                f"- {METHOD_NAMES[m]}, X_err in the rod / in the chain:"
+                f" {min(ratios.values()):.2f}-{max(ratios.values()):.2f}"
+                + (f" (over {ROD_LOSS_FLAG}x on {', '.join(over)})" if over else "")
+            )
+    if rod_aged is not None and {"stretch", "ccgan_sim"} <= set(rod_aged["methods_run"]):
+        t = rod_aged["table"]
+        ratios = [x("ccgan_sim", s, t) / x("stretch", s, t) for s in t]
+        lines.append(
+            f"- Aged arm in the rod: {ROD_NAMES['ccgan_sim']} / stretch only"
+            f" {min(ratios):.2f}-{max(ratios):.2f}"
+        )
+    return lines
+
+
 def write(chain: Chain, config: dict, config_path: Path) -> Path:
     """Writes chain.out/paper.md from the finished stages; returns its path."""
     results = _shapes(chain, TABLE_STAGE)
@@ -306,6 +364,24 @@ def write(chain: Chain, config: dict, config_path: Path) -> Path:
         lines += ["", f"Full tables: `{TABLE_STAGE}/shapes.md`"]
         if aged is not None:
             lines[-1] += f", the aged arm's `{AGED_TABLE_STAGE}/shapes.md`."
+    rod, rod_aged = _shapes(chain, ROD_TABLE_STAGE), _shapes(chain, ROD_AGED_TABLE_STAGE)
+    if rod is not None:
+        lines += [
+            "",
+            "## In the reference rod (the paper's simulator)",
+            "",
+            "The five shapes scored in the reference Cosserat rod (`eval.shapes --simulator"
+            " rod`, float64): the rod's own D_s path is the target; CCGAN-GP and WCGAN-GP"
+            " learnt from the rod's babbling with k chosen in the rod; the distilled translator"
+            " and the tracker were taught or planned in the chain and run in the rod. X_err (cm)"
+            " / phi_err (rad), then % of the shape's excursion:",
+            "",
+            *readme_tables(rod, ROD_NAMES),
+            "",
+            *rod_lines(rod, results, rod_aged),
+        ]
+        if rod_aged is not None:
+            lines += ["", "The aged arm in the rod:", "", *readme_tables(rod_aged, ROD_NAMES)]
     path = chain.out / "paper.md"
     path.write_text("\n".join(lines) + "\n")
     return path

@@ -347,6 +347,26 @@ def test_report_checks_each_target_shape_by_shape():
     assert "| circle | 2.98 / 0.276 | 7.14 / 0.636 | 0.90 / 0.100 |" in "\n".join(table)
 
 
+def test_report_checks_the_rod_tables_and_what_the_rod_costs():
+    rod = _results({"none": 5.0, "stretch": 0.5, "ccgan": 0.9, "wcgan": 2.0, "ccgan_sim": 0.6})
+    rod["table"]["kite"]["ccgan"]["x_err_cm_mean"] = 2.5  # above WCGAN-GP on the kite
+    chain = _results({"none": 5.0, "stretch": 0.6, "ccgan_sim": 0.3})
+    aged = _results({"none": 5.0, "stretch": 1.0, "ccgan_sim": 0.4})
+    lines = report.rod_lines(rod, chain, aged)
+    assert lines[0].endswith("below untranslated: 4 of 5 shapes: not met (missed on kite)")
+    assert "- CCGAN-GP (rod's data) / stretch only in the rod: 1.80-5.00" in lines
+    assert "- distilled (chain's) / stretch only in the rod: 1.20-1.20" in lines
+    cost = next(line for line in lines if line.startswith("- distilled, X_err in the rod"))
+    assert cost.endswith("2.00-2.00 (over 1.5x on circle, rectangle, damped_circle, ellipse, kite)")
+    assert "- stretch only, X_err in the rod / in the chain: 0.83-0.83" in lines
+    assert lines[-1] == "- Aged arm in the rod: distilled (chain's) / stretch only 0.40-0.40"
+    for shape in rod["table"].values():
+        for row in shape.values():
+            row |= {"k": 20, "target_excursion_cm": 10.0, "x_err_pct_of_excursion": 1.0}
+    header = report.readme_tables(rod | {"config": {}}, report.ROD_NAMES)[0]
+    assert "CCGAN-GP (rod's data) (k = 20)" in header and "paper Table I" in header
+
+
 def _recorded_chain(tmp_path, stages):
     """A chain whose stages ({name: (module, args, inputs)}) all finished, as their stage.json
     records show (no command run)."""
