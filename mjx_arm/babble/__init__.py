@@ -29,6 +29,9 @@ batch axis sharded over every device with a `NamedSharding` on a 1-D ``("batch",
 are padded to a multiple of the device count (and all to the same size, so there is one compile).
 ``--backend c`` runs MuJoCo C `mujoco.rollout` on all CPU cores; ``auto`` picks ``c`` when JAX's
 default backend is the CPU (MJX on CPU is far slower than MuJoCo C) and ``mjx`` otherwise.
+``--backend rod`` simulates the same programs in the reference Cosserat rod instead of the chain
+(`mjx_arm.load_rod`, float64; `mjx_arm.babble.rod`: its batches and cost, ~100-1,000x the
+chain's); its files carry the rod's model hash and ``"simulator": "rod"``, and it takes no MJCF.
 
 Multi-host. Start the same command on every host with ``--distributed --backend mjx`` and
 ``--coordinator HOST:PORT --num-processes N --process-id I`` (I = 0 .. N-1; process 0 runs the
@@ -62,6 +65,7 @@ from mujoco import mjx
 
 from mjx_arm import arm as arm_lib
 from mjx_arm import compile_notice, constants, dataset, domains
+from mjx_arm.babble import rod as rod_babble
 from mjx_arm.babble.memory import (  # noqa: F401  (the memory check; re-exported)
     C_BYTES_PER_TRAJECTORY,
     MEMORY_FRACTION,
@@ -73,7 +77,8 @@ from mjx_arm.babble.memory import (  # noqa: F401  (the memory check; re-exporte
 )
 from mjx_arm.programs import babble_programs, shape_like_programs
 
-BACKENDS = ("auto", "mjx", "c")
+#: "rod" is the reference rod (`mjx_arm.babble.rod`), the others the chain's simulators.
+BACKENDS = ("auto", "mjx", "c", "rod")
 #: Largest MuJoCo C batch per call, `Arm.rollout`'s own (see `mjx_arm.arm.C_CHUNK`).
 C_MAX_CHUNK = arm_lib.C_CHUNK
 
@@ -118,7 +123,8 @@ class BabbleConfig:
     domains: tuple[str, ...] = ("source", "constrained")
     """Domains to simulate (`mjx_arm.DOMAINS` names)."""
     backend: str = "auto"
-    """"mjx", "c" (MuJoCo C on all CPU cores) or "auto" (c when JAX runs on the CPU)."""
+    """"mjx", "c" (MuJoCo C on all CPU cores), "auto" (c when JAX runs on the CPU) or "rod"
+    (the reference Cosserat rod, float64, instead of the chain: `mjx_arm.babble.rod`)."""
     chunk: int = 4096
     """Trajectories simulated at once (over all devices); bounds device memory."""
     programs: str = "babbling"
@@ -171,7 +177,8 @@ PAPER = BabbleConfig()
 
 
 def resolve_backend(backend: str) -> str:
-    """ "auto" -> "c" when JAX runs on the CPU, else "mjx"; other names pass through."""
+    """ "auto" -> "c" when JAX runs on the CPU, else "mjx" (never "rod": the rod is asked for by
+    name); other names pass through."""
     if backend not in BACKENDS:
         raise ValueError(f"backend must be one of {BACKENDS}, got {backend!r}")
     if backend == "auto":
@@ -406,8 +413,10 @@ def babble(
     """Generates the babbling datasets of every domain and split in `config`.
 
     Args:
-      config: babbling options.
-      model_path, xml: the MJCF (default: the committed model), as for `mjx_arm.load`.
+      config: babbling options; backend "rod" simulates in `mjx_arm.load_rod(domain)`.
+      model_path, xml: the MJCF (default: the committed model), as for `mjx_arm.load`; with
+        backend "rod" neither may be given (the rod is made from the arm's physical values,
+        not from an MJCF).
       progress: show a tqdm bar (trajectories).
 
     Returns:
@@ -416,9 +425,15 @@ def babble(
 
     Raises:
       NotEnoughMemoryError: the run would not fit the available memory (`check_memory`).
+      ValueError: backend "rod" with an MJCF (`model_path` or `xml`).
     """
     from tqdm.auto import tqdm
 
+    if config.backend == "rod" and (model_path is not None or xml is not None):
+        raise ValueError(
+            "backend 'rod' simulates the reference rod, which is made from the arm's physical"
+            " values, not from an MJCF: give no model_path or xml"
+        )
     check_memory(config)  # before any work: a run that cannot fit fails now, not after hours
     splits = config.splits()
     total = len(config.domains) * sum(splits.values())
@@ -433,12 +448,21 @@ def babble(
         desc=f"babbling ({backend})",
     ) as bar:
         for domain in config.domains:
-            arm = arm_lib.load(model_path, domain, xml=xml)
+            if backend == "rod":
+                arm = _load_rod(domain)
+            else:
+                arm = arm_lib.load(model_path, domain, xml=xml)
             sharded = ShardedRollout(arm) if backend == "mjx" else None
             for split, n in splits.items():
                 bar.set_postfix_str(f"{domain}/{split}")
                 programs = family_programs(config, n, domain, split)
                 _check_processes_agree(config, backend, arm, programs)
+                if backend == "rod":
+                    poses = rod_babble.simulate_rod(
+                        arm, programs, chunk=config.chunk, progress=bar.update
+                    ).astype(np.float32)
+                    results.append(_dataset(config, backend, arm, split, programs, poses))
+                    continue
                 poses = simulate(
                     arm,
                     programs,
@@ -448,22 +472,33 @@ def babble(
                     sharded=sharded,
                     fixed_size=True,
                 )
-                results.append(
-                    dataset.Dataset(
-                        pressures_bar=programs,
-                        poses=poses,
-                        pose_low=np.zeros(6, np.float32),
-                        pose_high=np.ones(6, np.float32),
-                        domain=arm.domain.name,
-                        domain_fields=dataclasses.asdict(arm.domain),
-                        model_hash=arm.model_hash,
-                        seed=config.seed,
-                        split=split,
-                        config=_config_dict(config, backend),
-                    )
-                )
+                results.append(_dataset(config, backend, arm, split, programs, poses))
     low, high = dataset.workspace_bounds(*(d.poses for d in results))
     return [d.with_bounds(low, high) for d in results]
+
+
+def _load_rod(domain: str):
+    """The reference rod in `domain`, in babbling's dtype (imported here: `mjx_arm.rod_arm`
+    imports the model generator, which chain runs do not need)."""
+    from mjx_arm.rod_arm import load_rod
+
+    return load_rod(domain, dtype=rod_babble.DTYPE)
+
+
+def _dataset(config: BabbleConfig, backend: str, arm, split: str, programs, poses):
+    """One (domain, split) dataset of a run; its bounds are set later, over the whole run."""
+    return dataset.Dataset(
+        pressures_bar=programs,
+        poses=poses,
+        pose_low=np.zeros(6, np.float32),
+        pose_high=np.ones(6, np.float32),
+        domain=arm.domain.name,
+        domain_fields=dataclasses.asdict(arm.domain),
+        model_hash=arm.model_hash,
+        seed=config.seed,
+        split=split,
+        config=_config_dict(config, backend),
+    )
 
 
 def _check_processes_agree(
@@ -491,6 +526,8 @@ def _config_dict(config: BabbleConfig, backend: str) -> dict:
     d = dataclasses.asdict(config)
     d["domains"] = list(d["domains"])
     d["backend"] = backend
+    if backend == "rod":  # only there: the chain's files stay byte for byte as before
+        d |= rod_babble.rod_config_fields()
     return d
 
 

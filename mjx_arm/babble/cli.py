@@ -30,6 +30,7 @@ from mjx_arm.babble import (
     check_memory,
     run,
 )
+from mjx_arm.babble.rod import GPU_MAX_BATCH as ROD_GPU_MAX_BATCH
 
 
 def _int_at_least(low: int):
@@ -134,15 +135,21 @@ def _add_run_options(p: argparse.ArgumentParser) -> None:
         "--backend",
         choices=BACKENDS,
         default=PAPER.backend,
-        help="mjx, c (MuJoCo C on all cores) or auto (c when JAX runs on the CPU)",
+        help="mjx, c (MuJoCo C on all cores), auto (c when JAX runs on the CPU) or rod (the"
+        " reference Cosserat rod, float64, instead of the chain: ~100-1,000x slower, files"
+        " marked as the rod's; mjx_arm.babble.rod)",
     )
     p.add_argument(
         "--chunk",
         type=_int_at_least(1),
         default=PAPER.chunk,
-        help=f"trajectories per device call (MuJoCo C: at most {C_MAX_CHUNK})",
+        help=f"trajectories per device call (MuJoCo C: at most {C_MAX_CHUNK}; rod: at most"
+        f" {ROD_GPU_MAX_BATCH} on a GPU, two per core on a CPU)",
     )
-    p.add_argument("--model", help="MJCF file (default: the committed models/softarm.xml)")
+    p.add_argument(
+        "--model",
+        help="MJCF file (default: the committed models/softarm.xml); not with --backend rod",
+    )
     p.add_argument(
         "--out",
         default="out/babble",
@@ -192,6 +199,7 @@ def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
         p.error(str(err))
     try:
         check_distributed_args(args)
+        check_rod_args(args)
     except ValueError as err:
         p.error(str(err))
     try:
@@ -229,6 +237,27 @@ def check_model_file(path: str) -> None:
 #: Variables from which `jax.distributed.initialize()` finds the coordinator by itself: JAX's
 #: own, and the cluster environments it detects (SLURM, Open MPI, MPICH/PMI).
 COORDINATOR_ENV = ("JAX_COORDINATOR_ADDRESS", "SLURM_JOB_ID", "OMPI_MCA_orte_hnp_uri", "PMI_RANK")
+
+
+def check_rod_args(args: argparse.Namespace) -> None:
+    """Raises ValueError for what --backend rod cannot do.
+
+    --model is refused rather than recorded as unused: the rod is made from the arm's physical
+    values (`mjx_arm.model_gen.ArmParams`), not from an MJCF, so a run that named one would look
+    as though its data came from that model. --distributed is refused: the rod runs on one
+    process's default device (`mjx_arm.babble.rod`), and a GPU run of the long D_c set already
+    takes one call.
+    """
+    if args.backend != "rod":
+        return
+    if args.model is not None:
+        raise ValueError(
+            f"--model {args.model}: --backend rod simulates the reference rod, which is made from"
+            " the arm's physical values, not from an MJCF; leave --model out (its files carry"
+            " the rod's model hash)"
+        )
+    if args.distributed:
+        raise ValueError("--distributed: --backend rod runs in one process (one GPU call per set)")
 
 
 def check_distributed_args(args: argparse.Namespace) -> None:

@@ -8,6 +8,7 @@ from pathlib import Path
 from typing import Any
 
 from mjx_arm import constants
+from mjx_arm.babble.rod import GPU_MAX_BATCH as ROD_MAX_BATCH
 from mjx_arm.rollout_c import C_CHUNK as C_MAX_CHUNK
 
 #: A `mjx_arm.babble.BabbleConfig` (not imported: the package imports this module).
@@ -34,25 +35,29 @@ def memory_estimate_bytes(config: BabbleConfig, backend: str | None = None) -> i
     chunk holds in flight, which depends on the backend: MuJoCo C simulates at most
     `C_MAX_CHUNK` trajectories per call, each holding its substep states
     (`C_BYTES_PER_TRAJECTORY`), whatever `config.chunk` is; MJX holds one chunk's programs and
-    poses on the host (its states stay on the device).
+    poses on the host (its states stay on the device); the rod ("rod", `mjx_arm.babble.rod`)
+    holds at most `ROD_MAX_BATCH` (512; fewer on a CPU) trajectories' float64 programs and
+    poses per call (its state, 20 elements per trajectory, is negligible).
 
     Args:
       config: the run.
-      backend: "c", "mjx" or "auto" (the larger of the two, without asking JAX for its
+      backend: "c", "mjx", "rod" or "auto" (the larger of c and mjx, without asking JAX for its
         backend, which a multi-process run must not do before `jax.distributed.initialize`);
         None: `config.backend`.
     """
     backend = config.backend if backend is None else backend
     if backend == "auto":
         return max(memory_estimate_bytes(config, b) for b in ("c", "mjx"))
-    if backend not in ("c", "mjx"):
-        raise ValueError(f"backend must be 'auto', 'mjx' or 'c', got {backend!r}")
+    if backend not in ("c", "mjx", "rod"):
+        raise ValueError(f"backend must be 'auto', 'mjx', 'c' or 'rod', got {backend!r}")
     per_trajectory = config.n_steps * (3 + constants.POSE_DIM) * 4
     splits = config.splits()
     kept = len(config.domains) * sum(splits.values()) * per_trajectory
     chunk = min(config.chunk, max(splits.values()))
     if backend == "c":
         in_flight = min(chunk, C_MAX_CHUNK) * C_BYTES_PER_TRAJECTORY
+    elif backend == "rod":  # float64: twice float32's bytes, as programs, poses and their copy
+        in_flight = min(chunk, ROD_MAX_BATCH) * per_trajectory * 2 * 2
     else:
         in_flight = chunk * per_trajectory
     return int(kept + max(splits.values()) * per_trajectory + in_flight)
