@@ -258,20 +258,30 @@ def load_translator(method: str, cfg) -> tuple[TranslatorMethod | None, str]:
     ), why
 
 
-def check_translator_arms(translators: dict, arm) -> None:
-    """Refuses translators whose files record training on another arm than `arm`.
+def check_translator_arms(translators: dict, arm, *also) -> None:
+    """Refuses translators whose files record training on another arm than `arm` (or one of
+    `also`: with --simulator rod the rod, `eval.rod`, whose own-data translators are scored).
 
     Raises:
       TranslatorError: a file records another `Arm.model_hash` (another MJCF: e.g. the soft arm
         for translators of the solid-disc one), which would score them on an arm they never saw.
     """
+    accepted = [a.model_hash for a in (arm, *also)]
     for method, tr in translators.items():
-        other = sorted(tr.model_hashes - {arm.model_hash})
-        if other:
-            raise TranslatorError(
-                f"{method}: trained on the arm with model hash {', '.join(other)}, but the arm"
-                f" evaluated has {arm.model_hash} (choose the arm with --model)"
-            )
+        other = sorted(tr.model_hashes - set(accepted))
+        if not other:
+            continue
+        if also:
+            evaluated = f"the arms accepted have {' and '.join(accepted)}"
+        else:
+            evaluated = f"the arm evaluated has {arm.model_hash}"
+        hint = "choose the arm with --model"
+        if any(h.startswith("rod-") for h in other) and not also:
+            hint = "a translator of the rod's data: score it with --simulator rod"
+        raise TranslatorError(
+            f"{method}: trained on the arm with model hash {', '.join(other)}, but"
+            f" {evaluated} ({hint})"
+        )
 
 
 def forward_model(translators: dict[str, TranslatorMethod]):

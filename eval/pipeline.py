@@ -7,6 +7,9 @@ rest, and every k-th pose (the pose at the end of each source step's k periods) 
 the target: X_err (cm) and phi_err (rad), see `tracking.metrics`. Unlike the paper, which scored
 through the learned forward model F_c, the errors here come from the simulator itself.
 
+With EvalConfig.simulator "rod" the reference Cosserat rod (the paper's law, float64) scores
+the table instead of the fitted chain: targets, stretch k and every D_c rollout (`eval.rod`).
+
 This module holds what is evaluated (`EvalConfig`) and how (`evaluate`: load, plan, then the
 simulator steps of `eval.simulate`, then write); the report is `eval.report`, the command line
 `eval.shapes`.
@@ -23,6 +26,7 @@ from pathlib import Path
 import numpy as np
 
 import mjx_arm  # (before jax: sets the XLA CPU flag)
+from eval import rod
 from eval.methods import (
     DEFAULT_METHODS,
     METHOD_NAMES,
@@ -103,6 +107,10 @@ class EvalConfig:
     """Length of each shape program (s)."""
     backend: str = "c"
     """Simulator backend for every rollout except the oracle's optimisation: "c" or "mjx"."""
+    simulator: str = "chain"
+    """What scores the table: "chain" (the fitted MuJoCo arm, on `backend`) or "rod" (the
+    reference Cosserat rod, `mjx_arm.load_rod`, float64: targets, stretch k and every method's
+    D_c commands run there; no oracle, no videos; `eval.rod`)."""
     hold_factors: tuple[int, ...] = (1, 5, 10, 15, 20, 25, 30)
     """Stretch factors k (control periods per source step, >= 1) tried for the stretch baseline."""
     validation_duration_s: float = 20.0
@@ -191,6 +199,7 @@ class EvalConfig:
         for field in ("ccgan_path", "wcgan_path", "ccgan_sim_path"):
             _check_file(field, getattr(self, field))
         require(isinstance(self.oracle, OracleConfig), "oracle", "must be an OracleConfig")
+        rod.check_simulator(self)
         require(
             self.oracle.held or "oracle" in self.methods,
             "oracle.held",
@@ -300,27 +309,35 @@ def _shown_path(path: Path) -> str:
         return str(path)
 
 
-def translators_note(translators: dict[str, TranslatorMethod]) -> str:
+def translators_note(
+    translators: dict[str, TranslatorMethod], trained: dict[str, str] | None = None
+) -> str:
     """Which translator files were scored, read from the files loaded: each method's checkpoint
     (and its per-seed files beside it), and whether their labels record the arm they were
-    trained on. Empty without translators."""
+    trained on; with `trained` ({method: the arm its files record}, `eval.rod.trained_on`)
+    that arm per method. Empty without translators."""
     parts = []
     for method, tr in translators.items():
         files = [_shown_path(f) for f in tr.files]
         shown = files[0] if len(files) == 1 else f"{files[0]} and {', '.join(files[1:])}"
-        parts.append(f"{METHOD_NAMES.get(method, method)} from {shown}")
+        arm = f" ({trained[method]})" if trained and method in trained else ""
+        parts.append(f"{METHOD_NAMES.get(method, method)} from {shown}{arm}")
     if not parts:
         return ""
     labelled = all(tr.model_hashes for tr in translators.values())
-    trained = "trained on this arm, as their labels record" if labelled else "not all labelled"
-    return f"translators scored ({trained}): " + "; ".join(parts)
+    trained_on = "trained on this arm, as their labels record" if labelled else "not all labelled"
+    if trained:
+        trained_on = "the arm each was trained on, as its labels record"
+    return f"translators scored ({trained_on}): " + "; ".join(parts)
 
 
-def model_description(cfg: EvalConfig, translators: dict | None = None) -> dict:
+def model_description(
+    cfg: EvalConfig, translators: dict | None = None, trained: dict[str, str] | None = None
+) -> dict:
     """{"file": the arm's MJCF (relative to the repository when inside it), "note": what it is,
-    and which translator files were scored on it (`translators_note`)} for shapes.json and
-    shapes.md."""
-    scored = translators_note(translators or {})
+    and which translator files were scored on it (`translators_note`; `trained`: the arm each
+    was trained on, in rod mode)} for shapes.json and shapes.md."""
+    scored = translators_note(translators or {}, trained)
     if cfg.xml is not None:
         return {
             "file": "MJCF text (EvalConfig.xml)",
@@ -378,8 +395,8 @@ def evaluate(cfg: EvalConfig, command: str = "", log=print) -> dict:
     """
     t_start = time.perf_counter()
     run = RunLog(log)
-    cfg, arm_s, arm_c, translators, model = _load(cfg, run)
-    plan = _plan(cfg, arm_s, arm_c, translators, run)
+    cfg, arm_s, arm_c, translators, model, rods = _load(cfg, run)
+    plan = _plan(cfg, arm_s, arm_c, translators, run, rods)
     oracle_future = start_oracle(plan, run)
     mpc_commands = run_mpc(plan, run)
     commands_of, poses_of = command_and_roll_out(plan, mpc_commands, run)
@@ -389,8 +406,10 @@ def evaluate(cfg: EvalConfig, command: str = "", log=print) -> dict:
     results = {
         "command": command,
         "machine": machine_description(),
-        "backend": cfg.backend,
-        "model_hash": arm_s.model_hash,
+        "simulator": cfg.simulator,
+        "backend": plan.backend,
+        "model_hash": plan.arm_s.model_hash,
+        **({"rod": _rod_description(plan)} if rods is not None else {}),
         "model": model,
         "config": dataclasses.asdict(cfg)
         | {"xml": None if cfg.xml is None else "custom", "model_path": model["file"]},
@@ -412,9 +431,13 @@ def _load(cfg: EvalConfig, run: RunLog) -> tuple:
     a missing default one is skipped with a note, never imitated), the arms, and the output
     folder, made only once every translator has loaded and matches the D_c arm.
 
+    With cfg.simulator "rod" the rods are loaded too, and a translator is accepted when its
+    files record the chain's D_c arm or the rod (`eval.rod`); the arm description then says
+    which each was trained on.
+
     Returns:
-      (cfg with out_dir set to the folder made, D_s arm, D_c arm, {method: TranslatorMethod},
-      `model_description(cfg)`).
+      (cfg with out_dir set to the folder made, the chain's D_s arm, its D_c arm,
+      {method: TranslatorMethod}, `model_description(cfg)`, (D_s rod, D_c rod) or None).
     """
     t0 = time.perf_counter()
     translators: dict[str, TranslatorMethod] = {}
@@ -430,24 +453,32 @@ def _load(cfg: EvalConfig, run: RunLog) -> tuple:
                 f"{sorted(tr.trained_seeds)}; its ± spans training seeds."
             )
     run.timings["translators_s"] = time.perf_counter() - t0
-    model = model_description(cfg, translators)
+    t0 = time.perf_counter()
+    arm_s, arm_c = load_arms(cfg)
+    rods = rod.load_rod_arms(cfg.target_domain) if cfg.simulator == "rod" else None
+    run.timings["load_s"] = time.perf_counter() - t0
+    check_translator_arms(translators, arm_c, *(rods[1:] if rods else ()))
+    trained = rod.trained_on(translators, arm_c.model_hash, rods[1].model_hash) if rods else None
+    model = model_description(cfg, translators, trained)
     default_arm = Path(cfg.model_path).resolve() == constants.TRANSLATOR_MODEL_PATH.resolve()
     if translators and not default_arm and cfg.xml is None:
         run.note(f"the arm {model['file']} is {model_description(cfg)['note']}.")
-    t0 = time.perf_counter()
-    arm_s, arm_c = load_arms(cfg)
-    run.timings["load_s"] = time.perf_counter() - t0
-    check_translator_arms(translators, arm_c)
+    note = rod.rod_note(cfg, default_arm and cfg.xml is None) if rods else None
+    if note:
+        run.note(note)
     out_dir = output_dir(cfg)
     cfg = dataclasses.replace(cfg, out_dir=str(out_dir))
     run.log(f"writing into {out_dir}" + (" (the committed results)" if is_main_job(cfg) else ""))
-    return cfg, arm_s, arm_c, translators, model
+    return cfg, arm_s, arm_c, translators, model, rods
 
 
-def _plan(cfg: EvalConfig, arm_s, arm_c, translators: dict, run: RunLog) -> Plan:
+def _plan(cfg: EvalConfig, arm_s, arm_c, translators: dict, run: RunLog, rods=None) -> Plan:
     """Step 2: the methods that run, the stretch k (chosen on the validation program when
     stretch, mpc or the oracle needs it), every shape's D_s program and target poses (all
-    shapes first: the oracle optimises them together), and the oracle's window."""
+    shapes first: the oracle optimises them together), and the oracle's window.
+
+    With `rods` ((D_s rod, D_c rod): cfg.simulator "rod") k and the targets come from the rods,
+    which then score the table; the chain's D_c arm `arm_c` is kept for the tracker."""
     import jax
 
     run_oracle = "oracle" in cfg.methods
@@ -458,18 +489,18 @@ def _plan(cfg: EvalConfig, arm_s, arm_c, translators: dict, run: RunLog) -> Plan
                 " 500 s for 10 Adam steps of five 2 s programs at k = 10)."
             )
     methods = [m for m in cfg.methods if m not in TRANSLATOR_METHODS or m in translators]
+    scorer_s, scorer_c, backend = (arm_s, arm_c, cfg.backend) if rods is None else (*rods, "rod")
     k_stretch, k_errors = 1, {}
     if "stretch" in methods or "oracle" in methods or "mpc" in methods:
         t0 = time.perf_counter()
         p_val = programs.validation_program(cfg.validation_duration_s)
-        k_stretch, k_errors = choose_stretch_k(arm_s, arm_c, p_val, cfg.hold_factors, cfg.backend)
+        k_stretch, k_errors = choose_stretch_k(scorer_s, scorer_c, p_val, cfg.hold_factors, backend)
         run.timings["choose_k_s"] = time.perf_counter() - t0
         run.log(f"stretch k = {k_stretch} (validation X_err cm by k: {k_errors})")
     t0 = time.perf_counter()
     sources = {shape: programs.SHAPES[shape](cfg.duration_s) for shape in cfg.shapes}
-    target_list = rollout_grouped(
-        arm_s, [(sources[s], 1) for s in cfg.shapes], cfg.backend, "D_s targets"
-    )
+    label = "D_s targets" + (" (rod)" if rods else "")
+    target_list = rollout_grouped(scorer_s, [(sources[s], 1) for s in cfg.shapes], backend, label)
     targets = dict(zip(cfg.shapes, target_list, strict=True))
     run.timings["targets_s"] = time.perf_counter() - t0
     horizon = None
@@ -479,8 +510,34 @@ def _plan(cfg: EvalConfig, arm_s, arm_c, translators: dict, run: RunLog) -> Plan
             steps = int(round(cfg.oracle.horizon_s * programs.CONTROL_HZ))
             horizon = max(1, min(horizon, steps))
     return Plan(
-        cfg, arm_s, arm_c, translators, methods, k_stretch, k_errors, sources, targets, horizon
+        cfg,
+        scorer_s,
+        scorer_c,
+        translators,
+        methods,
+        k_stretch,
+        k_errors,
+        sources,
+        targets,
+        horizon,
+        rollout_backend=backend,
+        tracker_arm=arm_c if rods is not None else None,
     )
+
+
+def _rod_description(plan: Plan) -> dict:
+    """shapes.json's "rod": the rod that scored the table, the chain the tracker planned in,
+    and the arm each translator was trained on (`eval.rod.trained_on`)."""
+    chain_hash = plan.tracker_arm.model_hash
+    return {
+        "scored_in": rod.SCORED_IN["rod"],
+        "model_hash": plan.arm_c.model_hash,
+        "dtype": plan.arm_c.dtype,
+        "chain_model_hash": chain_hash,
+        "translators_trained_on": rod.trained_on(
+            plan.translators, chain_hash, plan.arm_c.model_hash
+        ),
+    }
 
 
 def _write(plan: Plan, results: dict, trajectories: dict, run: RunLog, t_start: float) -> None:

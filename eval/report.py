@@ -9,6 +9,7 @@ the oracle's settings) and render as they did. Errors are X_err (cm) and phi_err
 from __future__ import annotations
 
 from eval.methods import METHOD_NAMES
+from eval.rod import scored_in
 
 #: The paper's Table I: {shape: {method: (X_err cm, phi_err rad)}}, scored through its F_c.
 PAPER_TABLE_I = {
@@ -143,12 +144,16 @@ def _header(results: dict) -> list[str]:
     notes."""
     config = results["config"]
     mark = run_mark(config)
-    lines = ["# Trajectory tracking in D_c (simulator-scored)", ""]
+    where = (
+        "scored in the reference rod" if results.get("simulator") == "rod" else "simulator-scored"
+    )
+    lines = [f"# Trajectory tracking in D_c ({where})", ""]
     if mark:
         lines += [f"**{mark}** (`--quick`: a smoke test of the pipeline).", ""]
     lines += [
         f"- command: `{results['command']}`",
         f"- machine: {results['machine']}",
+        *filter(None, [scored_in(results)]),
         f"- simulator backend: {results['backend']}; model hash {results['model_hash']};"
         f" domains: source -> {config.get('target_domain', 'constrained')}",
     ]

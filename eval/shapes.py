@@ -4,6 +4,19 @@
 module's `main`; `python -m eval.shapes --help` lists the options): the flags become an
 `eval.pipeline.EvalConfig`, checked before any work, and `eval.pipeline.evaluate` does the work.
 
+`--simulator {chain,rod}` picks what scores the table. "chain" (the default) is the fitted
+MuJoCo arm, on `--backend`. "rod" is the reference Cosserat rod (`mjx_arm.load_rod`, the paper's
+law, float64): the paper's Table I in the paper's own kind of simulator. Then the D_s targets are
+the rod's own D_s path, stretch only's k is chosen in the rod, every method's D_c commands run in
+the rod in --target-domain, translators trained on the chain or on the rod's data are both
+scored (the report says which), and the tracker (--methods mpc) plans in the chain's MuJoCo C
+towards the rod's targets, its commands then run in the rod. The oracle, --render and --backend
+mjx are usage errors with the rod (the oracle differentiates through MJX of the chain, videos
+draw the chain's model); without --methods the oracle is left out. The rod is latency-bound: on
+a GPU each batch costs about its longest program's time (every rod call is announced), so a
+60 s table is a GPU job; on a 2-core CPU it simulates 25-37 s per second: use --duration and
+--no-robustness there (`eval.rod`).
+
 The pressure programs themselves are pure functions of time and live below every layer that
 draws them, in `mjx_arm.programs` (the circle, rectangle, damped circle, ellipse and kite, each
 a [T, 3] array of chamber commands in bar at 10 Hz; the validation program; the random
@@ -42,6 +55,7 @@ from eval.pipeline import (
     is_main_job,
     quick,
 )
+from eval.rod import SIMULATORS
 from eval.simulate import MPC_RESULT, ORACLE_PROGRESS, ORACLE_START
 from mjx_arm import constants, programs, run_folder
 from mjx_arm.atomic import link_or_copy
@@ -105,6 +119,7 @@ FLAGS = {
     "seeds": "--seeds",
     "out_dir": "--out",
     "backend": "--backend",
+    "simulator": "--simulator",
     "duration_s": "--duration",
     "hold_factors": "--hold-factors",
     "robust_methods": "--robust-methods",
@@ -196,6 +211,14 @@ def _add_run_options(p: argparse.ArgumentParser) -> None:
         choices=["c", "mjx"],
         default="c",
         help="simulator of every rollout but the oracle's: MuJoCo C or MJX",
+    )
+    p.add_argument(
+        "--simulator",
+        choices=list(SIMULATORS),
+        default=EvalConfig.simulator,
+        help="what scores the table: the fitted chain (on --backend) or the reference Cosserat"
+        " rod (the paper's law, float64; the tracker still plans in the chain; no oracle, no"
+        " --render; a GPU job at 60 s)",
     )
     p.add_argument(
         "--duration",
@@ -367,6 +390,8 @@ def parse_args(argv: list[str] | None = None) -> EvalConfig:
         except OSError as err:
             p.error(f"--out: {err}")
     methods = default_methods() if a.methods is None else _method_keys(a.methods)
+    if a.methods is None and a.simulator == "rod":
+        methods = tuple(m for m in methods if m != "oracle")
     noise_stds = default_noise_stds() if a.noise_stds is None else a.noise_stds
     horizon = None if a.oracle_horizon is not None and a.oracle_horizon <= 0 else a.oracle_horizon
     try:
@@ -376,6 +401,7 @@ def parse_args(argv: list[str] | None = None) -> EvalConfig:
             seeds=tuple(a.seeds),
             duration_s=a.duration,
             backend=a.backend,
+            simulator=a.simulator,
             hold_factors=tuple(a.hold_factors),
             render=a.render,
             robustness=not a.no_robustness,
@@ -402,7 +428,13 @@ def parse_args(argv: list[str] | None = None) -> EvalConfig:
         p.error(f"{FLAGS.get(err.field, err.field)} {err.problem}")
     if a.out is None:
         _check_default_folder(p, cfg)
-    if a.methods is None and "oracle" not in methods:
+    if a.methods is None and a.simulator == "rod":
+        print(
+            "NOTE: --simulator rod leaves the oracle out (it optimises through MJX of the chain)"
+            + ("; WCGAN-GP is left out on a CPU" if "wcgan" not in methods else "")
+            + "."
+        )
+    elif a.methods is None and "oracle" not in methods:
         print(
             "NOTE: the oracle and WCGAN-GP are left out by default on CPU (the oracle's MJX"
             " gradients: ~8 min more on 2 cores with --oracle-steps 10); add them with"

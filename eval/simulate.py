@@ -116,8 +116,10 @@ class Plan:
 
     cfg: Any
     """The `eval.pipeline.EvalConfig` run (not imported: the pipeline imports this module)."""
-    arm_s: mjx_arm.Arm
-    arm_c: mjx_arm.Arm
+    arm_s: mjx_arm.Arm | mjx_arm.RodArm
+    """The D_s arm of the targets: the chain's, or with cfg.simulator "rod" the rod's."""
+    arm_c: mjx_arm.Arm | mjx_arm.RodArm
+    """The D_c arm every method's commands run in (the chain's, or the rod's)."""
     translators: dict[str, TranslatorMethod]
     methods: list[str]
     """cfg.methods less the translators that were skipped."""
@@ -131,6 +133,21 @@ class Plan:
     """Shape -> D_s poses [T, 6], the target of every method."""
     horizon: int | None
     """Source steps the oracle optimises (None when it does not run)."""
+    rollout_backend: str | None = None
+    """Backend of arm_s's and arm_c's rollouts: "rod" for the rod (None: cfg.backend)."""
+    tracker_arm: mjx_arm.Arm | None = None
+    """The D_c arm the tracker plans in: the chain's, in MuJoCo C, even when the rod scores the
+    table (None: arm_c)."""
+
+    @property
+    def backend(self) -> str:
+        """Backend of every rollout of arm_s and arm_c: "c", "mjx" or "rod"."""
+        return self.rollout_backend or self.cfg.backend
+
+    @property
+    def planner(self) -> mjx_arm.Arm:
+        """The D_c arm the tracker (and the oracle's mpc start) plans in."""
+        return self.tracker_arm if self.tracker_arm is not None else self.arm_c
 
     @property
     def translated(self) -> list[str]:
@@ -197,13 +214,16 @@ def start_oracle(plan: Plan, run: RunLog) -> _InThread | None:
 
 def run_mpc(plan: Plan, run: RunLog) -> dict[str, np.ndarray]:
     """Step 4: mpc's D_c commands, shape -> [T * k_stretch, 3] (bar), every shape tracked at once
-    in the D_c simulator (empty when mpc does not run)."""
+    in the chain's D_c simulator (`Plan.planner`, MuJoCo C; with the rod scoring the table,
+    towards the rod's targets at the rod's k; empty when mpc does not run). Its cache in the
+    output folder is fingerprinted by arm, targets, start, k and settings (`tracking.mpc`), so
+    a run towards other targets (the chain's, the rod's) never reads another's commands."""
     if "mpc" not in plan.methods:
         return {}
     shapes = plan.cfg.shapes
     t0 = time.perf_counter()
     every, info = mpc.track(
-        plan.arm_c,
+        plan.planner,
         np.stack([plan.targets[s] for s in shapes]),
         plan.k_stretch,
         np.stack([plan.sources[s] for s in shapes]),
@@ -211,7 +231,8 @@ def run_mpc(plan: Plan, run: RunLog) -> dict[str, np.ndarray]:
         result_path=_kept(plan.cfg, MPC_RESULT),
     )
     run.timings["mpc_s"] = time.perf_counter() - t0
-    how = f"read from {MPC_RESULT}" if info["reused"] else "tracked in the D_c simulator"
+    where = "the chain's D_c simulator" if plan.tracker_arm is not None else "the D_c simulator"
+    how = f"read from {MPC_RESULT}" if info["reused"] else f"tracked in {where}"
     run.log(f"mpc: {len(shapes)} shapes {how}, {run.timings['mpc_s']:.1f} s")
     return dict(zip(shapes, every, strict=True))
 
@@ -254,7 +275,6 @@ def command_and_roll_out(plan: Plan, mpc_commands: dict, run: RunLog) -> tuple[d
     Returns:
       ({key: (commands [T * k, 3] bar, k)}, {key: D_c poses [T, 6] at every k-th period}).
     """
-    cfg = plan.cfg
     t0 = time.perf_counter()
     specs = _rollout_specs(plan)
     keys = [spec[0] for spec in specs]
@@ -268,10 +288,10 @@ def command_and_roll_out(plan: Plan, mpc_commands: dict, run: RunLog) -> tuple[d
     t0 = time.perf_counter()
     n_table = sum(key[0] == "table" for key in keys)
     label = f"D_c rollouts ({n_table} shape x method, {len(keys) - n_table} noise + periodicity)"
-    poses_of = dict(zip(keys, rollout_grouped(plan.arm_c, jobs, cfg.backend, label), strict=True))
+    poses_of = dict(zip(keys, rollout_grouped(plan.arm_c, jobs, plan.backend, label), strict=True))
     run.timings["dc_rollouts_s"] = time.perf_counter() - t0
     run.log(
-        f"{len(jobs)} D_c rollouts ({cfg.backend}): commands {run.timings['commands_s']:.1f} s,"
+        f"{len(jobs)} D_c rollouts ({plan.backend}): commands {run.timings['commands_s']:.1f} s,"
         f" rollouts {run.timings['dc_rollouts_s']:.1f} s"
     )
     return dict(zip(keys, jobs, strict=True)), poses_of
@@ -294,7 +314,7 @@ def finish_oracle(plan: Plan, future: _InThread | None, run: RunLog) -> dict[str
     timings["oracle_first_step_s"] = info["step_wall_s"][0] if info["step_wall_s"] else 0.0
     timings["oracle_step_s_median"] = float(np.median(info["step_wall_s"][1:] or [0.0]))
     history = np.asarray(info["loss_history"]).reshape(cfg.oracle.steps, len(cfg.shapes))
-    oracle_poses = rollout_grouped(plan.arm_c, [(c, plan.k_stretch) for c in cmds], cfg.backend)
+    oracle_poses = rollout_grouped(plan.arm_c, [(c, plan.k_stretch) for c in cmds], plan.backend)
     out = {}
     for i, shape in enumerate(cfg.shapes):
         losses = [float(v) for v in history[:, i]]

@@ -45,6 +45,8 @@ from mjx_arm.rod_params import DOMAIN_DAMPING_PER_S, CosseratParams, RodState, m
 
 #: The rollout's floating-point types; float64 is the default (see `RodArm`).
 DTYPES = ("float64", "float32")
+#: What `RodArm.rollout` accepts as `backend` (`Arm.rollout`'s keyword): the rod's one simulator.
+BACKENDS = (None, "rod")
 #: Largest tip difference (fraction of L) allowed between `RodArm` in float64 and the committed
 #: reference path (`cosserat.rollout`) by `python -m mjx_arm.rod_check` and the tests.
 AGREEMENT_FRACTION_OF_L = 1e-6
@@ -170,7 +172,7 @@ class RodArm:
         unroll = self.unroll or DEFAULT_UNROLL.get(jax.default_backend(), 1)
         return _batched_rollout(self.params, self.dtype, self.valve, unroll)
 
-    def rollout(self, pressures_bar) -> np.ndarray:
+    def rollout(self, pressures_bar, backend: str | None = None) -> np.ndarray:
         """Simulates pressure programs from rest and returns the tip pose after each command.
 
         As `mjx_arm.Arm.rollout`: commands outside [0, 3.5] bar saturate like a real valve and
@@ -179,14 +181,24 @@ class RodArm:
 
         Args:
           pressures_bar: [T, 3] or [B, T, 3] chamber commands (bar) at 10 Hz.
+          backend: None or "rod", so that code written for `Arm.rollout(p, backend=...)` (e.g.
+            `tracking.held.rollout_grouped`) runs the rod too; the rod has one simulator (JAX,
+            on JAX's default device), so the chain's "c" and "mjx" are refused rather than
+            silently run in the rod.
 
         Returns:
           [T, 6] or [B, T, 6] float64 poses: tip position (m) then unit d3.
 
         Raises:
-          ValueError: bad shape (an empty batch included), boolean or non-finite pressures.
+          ValueError: bad shape (an empty batch included), boolean or non-finite pressures, or
+            a backend other than None or "rod".
           SimulationDivergedError: a trajectory's pose became non-finite.
         """
+        if backend not in BACKENDS:
+            raise ValueError(
+                f"backend {backend!r}: the reference rod runs only its own JAX simulator; give"
+                " backend=None or 'rod' ('c' and 'mjx' are the chain's, mjx_arm.Arm.rollout)"
+            )
         if np.asarray(pressures_bar).dtype == np.bool_:
             raise ValueError("pressures_bar is boolean; give pressures in bar (numbers)")
         batched = checks.check_pressures(pressures_bar)

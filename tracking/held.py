@@ -10,10 +10,12 @@ periods, every k-th pose, is what is compared with the D_s target [T, 6].
 from __future__ import annotations
 
 import hashlib
+import sys
 
 import numpy as np
 from tqdm import tqdm
 
+from mjx_arm.constants import CONTROL_HZ
 from mjx_arm.machine import usable_cores
 from tracking import metrics
 
@@ -34,8 +36,47 @@ def run_dc(arm_c, commands_c: np.ndarray, k: int, backend: str) -> np.ndarray:
     return every_kth(arm_c.rollout(commands_c, backend=backend), k)
 
 
+#: Most trajectories in one padded rod call on an accelerator: one H200 runs the rod at ~1,090
+#: simulated s/s at batch 512 and ~400 at 64 (nearly the time of one trajectory up to ~64), so
+#: larger batches buy little and cost memory.
+ROD_CHUNK = 512
+
+
+def _on_accelerator() -> bool:
+    """Whether JAX's default device is not the CPU (the rod's padded batches pay off there)."""
+    import jax
+
+    return jax.default_backend() != "cpu"
+
+
+def hold_last(commands: list[np.ndarray]) -> np.ndarray:
+    """Programs [N_i, 3] (bar) padded to the longest by holding each one's last command:
+    [B, max N_i, 3]. A simulator is causal, so the first N_i poses of a padded program are the
+    unpadded program's."""
+    longest = max(len(c) for c in commands)
+    return np.stack([np.concatenate([c, np.repeat(c[-1:], longest - len(c), 0)]) for c in commands])
+
+
+def _announce(label: str | None, n: int, sim_s: float, longest_s: float) -> None:
+    """One line on stderr before a rod call that no progress bar can follow (minutes on a GPU)."""
+    if label:
+
+        def shown(s: float) -> str:
+            return f"{s:,.0f}" if s >= 100 else f"{s:.1f}"
+
+        tqdm.write(
+            f"{label}: the rod runs {n} trajectories together ({shown(sim_s)} simulated s, the"
+            f" longest {shown(longest_s)} s)",
+            file=sys.stderr,
+        )
+
+
 def rollout_grouped(
-    arm, jobs: list[tuple[np.ndarray, int]], backend: str, progress: str | None = None
+    arm,
+    jobs: list[tuple[np.ndarray, int]],
+    backend: str,
+    progress: str | None = None,
+    padded: bool | None = None,
 ) -> list[np.ndarray]:
     """Poses of many (commands [T * k, 3] bar, k) jobs, every k-th pose ([T, 6] each).
 
@@ -47,6 +88,16 @@ def rollout_grouped(
     are the same, as every trajectory is simulated on its own. MJX keeps one call per group
     (another batch size would compile again).
 
+    The reference rod (`mjx_arm.RodArm`, backend "rod") is latency-bound: on a GPU one call
+    costs about its longest trajectory's time whatever the batch up to ~64. So there (`padded`
+    None and JAX's default device not the CPU, or `padded` True) every job runs in as few calls
+    as it can: programs sorted by length, chunks of at most `ROD_CHUNK`, each program padded to
+    its chunk's longest by holding its last command (`hold_last`); the rod is causal, so each
+    job's poses are its own first T * k, every k-th kept. Each call is announced on stderr with
+    `progress`, as the bar moves only between calls. On a CPU (cost ~ total simulated seconds,
+    batching barely helps) the rod runs one group at a time like the chain, in batches of two
+    trajectories per core with `progress`.
+
     Jobs with equal commands and k are simulated once and share the poses (copies): the
     simulator is deterministic and every trajectory runs on its own, so a deterministic method's
     repetitions (the periodicity test) and its seeds cost one rollout.
@@ -56,20 +107,52 @@ def rollout_grouped(
         cmd = np.ascontiguousarray(cmd, dtype=np.float64)
         same = groups.setdefault((cmd.shape, int(k)), {})
         same.setdefault(hashlib.sha256(cmd.tobytes()).digest(), []).append(i)
+    copies_of = {c[0]: c for same in groups.values() for c in same.values()}
     out: list[np.ndarray | None] = [None] * len(jobs)
+
+    def keep(first: int, poses: np.ndarray) -> int:
+        for n, i in enumerate(copies_of[first]):
+            out[i] = poses if n == 0 else poses.copy()
+        return len(copies_of[first])
+
+    if padded is None:
+        padded = backend == "rod" and _on_accelerator()
     with tqdm(total=len(jobs), desc=progress, unit="traj", disable=not progress) as bar:
+        if padded:
+            _rollout_padded(arm, jobs, sorted(copies_of), backend, progress, keep, bar)
+            return out
         for (_, k), same in groups.items():
             index = [copies[0] for copies in same.values()]
-            copies_of = {copies[0]: copies for copies in same.values()}
-            batch = 2 * usable_cores() if progress and backend == "c" else len(index)
+            small = progress and backend in ("c", "rod")
+            batch = 2 * usable_cores() if small else len(index)
             for start in range(0, len(index), max(batch, 1)):
                 part = index[start : start + batch]
                 poses = run_dc(arm, np.stack([jobs[i][0] for i in part]), k, backend)
-                for first, p in zip(part, poses, strict=True):
-                    for n, i in enumerate(copies_of[first]):
-                        out[i] = p if n == 0 else p.copy()
-                bar.update(sum(len(copies_of[first]) for first in part))
+                bar.update(sum(keep(first, p) for first, p in zip(part, poses, strict=True)))
     return out
+
+
+def _rollout_padded(arm, jobs, index: list[int], backend, progress, keep, bar) -> None:
+    """`rollout_grouped`'s padded calls: jobs `index` (one per distinct job) longest first, in
+    chunks of at most `ROD_CHUNK` of equal size, each padded to its longest (`hold_last`)."""
+    index = sorted(index, key=lambda i: -len(jobs[i][0]))
+    n_calls = -(-len(index) // ROD_CHUNK)
+    size = -(-len(index) // max(n_calls, 1))
+    period_s = 1.0 / CONTROL_HZ
+    for start in range(0, len(index), max(size, 1)):
+        part = index[start : start + size]
+        commands = [np.asarray(jobs[i][0], np.float64) for i in part]
+        program = hold_last(commands)
+        _announce(
+            progress,
+            len(part),
+            sum(len(c) for c in commands) * period_s,
+            program.shape[1] * period_s,
+        )
+        poses = arm.rollout(program, backend=backend)
+        for i, p in zip(part, poses, strict=True):
+            cmd, k = jobs[i]
+            bar.update(keep(i, every_kth(p[: len(cmd)], int(k))))
 
 
 def choose_stretch_k(
@@ -81,7 +164,9 @@ def choose_stretch_k(
       arm_s, arm_c: the D_s and D_c arms.
       program_bar: [T, 3] D_s commands (bar), e.g. `mjx_arm.programs.validation_program`.
       candidates: stretch factors k >= 1 to try.
-      backend: simulator of the rollouts, "c" or "mjx".
+      backend: simulator of the rollouts, "c" or "mjx", or "rod" with `mjx_arm.RodArm`s: then
+        the candidates run through `rollout_grouped` (on a GPU one padded batch, which costs
+        about the longest candidate's time instead of their sum).
       progress: show a progress bar over the candidates.
 
     Returns:
@@ -89,6 +174,13 @@ def choose_stretch_k(
     """
     target = arm_s.rollout(program_bar, backend=backend)
     errors = {}
+    if backend == "rod":
+        ks = list(dict.fromkeys(int(k) for k in candidates))
+        label = "stretch k on the validation program" if progress else None
+        jobs = [(stretch(program_bar, k), k) for k in ks]
+        for k, poses in zip(ks, rollout_grouped(arm_c, jobs, backend, label), strict=True):
+            errors[k] = float(metrics.position_error_cm(poses, target).mean())
+        return min(errors, key=errors.get), errors
     bar = tqdm(
         candidates, desc="stretch k on the validation program", unit="k", disable=not progress
     )
