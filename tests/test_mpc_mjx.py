@@ -101,3 +101,7 @@ def test_a_resume_file_of_another_medium_does_not_match():
     key_c = mpc_mjx._fingerprint(arm_c, 2, cfg, init, target, 3)
     assert key_c == mpc_mjx._fingerprint(arm_c, 2, cfg, init, target, 3)
     assert key_c != mpc_mjx._fingerprint(arm_a, 2, cfg, init, target, 3)
+    # The MuJoCo C tracker's cache (eval's mpc_commands.npz) tells them apart the same way.
+    key_c = mpc._fingerprint(arm_c, target, init, 3, cfg)
+    assert key_c == mpc._fingerprint(arm_c, target, init, 3, cfg)
+    assert key_c != mpc._fingerprint(arm_a, target, init, 3, cfg)

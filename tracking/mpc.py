@@ -219,11 +219,13 @@ def track(
 
 
 def _fingerprint(arm_c: Arm, targets, init, k: int, cfg: MpcConfig) -> str:
-    """What the tracker's commands depend on: the arm, the targets, the start, k, the settings."""
+    """What the tracker's commands depend on: the arm and its medium (two domains share the
+    MJCF's hash, so the domain is named on its own), the targets, the start, k, the settings."""
     digest = hashlib.sha256()
     for array in (targets, init):
         digest.update(np.ascontiguousarray(array, np.float64).tobytes())
-    digest.update(repr((arm_c.model_hash, k, dataclasses.asdict(cfg))).encode())
+    domain = getattr(arm_c, "domain", None)
+    digest.update(repr((arm_c.model_hash, domain, k, dataclasses.asdict(cfg))).encode())
     return digest.hexdigest()[:16]
 
 
