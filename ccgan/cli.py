@@ -206,19 +206,34 @@ def add_data_flags(parser: argparse.ArgumentParser) -> None:
         "--model",
         default=None,
         help="MJCF of the arm the data must come from (its model hash is checked);"
-        " default: any, as long as every file agrees",
+        " default: any, as long as every file agrees. Not with the rod's data (babbled with"
+        " --backend rod), which no MJCF made",
     )
+
+
+def describe_arm(d) -> str:
+    """ "the reference rod (model hash rod-...)" or "the chain of model hash ..." for a
+    `ccgan.data.DomainData` (what simulated its files)."""
+    from ccgan.sim_choice import simulator_of
+
+    if simulator_of(d.model_hash) == "rod":
+        return f"the reference rod (model hash {d.model_hash})"
+    return f"the chain of model hash {d.model_hash}"
 
 
 def data_from_args(parser: argparse.ArgumentParser, args):
     """The (D_s, D_c) `ccgan.data.DomainData` of `add_data_flags`' flags.
 
     Unreadable, mixed or wrong-arm files and an unloadable --model are usage errors (status 2)
-    with the message naming the files, instead of a traceback.
+    with the message naming the files, instead of a traceback. The rod's data
+    (`mjx_arm.babble --backend rod`) and the chain's are told apart by their model hashes: one
+    slot's rod files beside the other's chain files, or --model (an MJCF) with rod files, are
+    refused with a message that says so.
     """
     import mjx_arm
-    from ccgan.data import read_translation_files
-    from mjx_arm.dataset import DatasetError, ModelHashMismatchError
+    from ccgan.data import read_domain
+    from ccgan.sim_choice import simulator_of
+    from mjx_arm.dataset import DatasetError
 
     model_hash = None
     if args.model is not None:
@@ -226,9 +241,42 @@ def data_from_args(parser: argparse.ArgumentParser, args):
             model_hash = mjx_arm.load(args.model).model_hash
         except (FileNotFoundError, ValueError) as err:
             parser.error(f"--model {args.model}: {err}")
-    try:
-        return read_translation_files(args.source, args.constrained, model_hash)
-    except ModelHashMismatchError as err:
-        parser.error(f"{err} (--model {args.model} has model hash {model_hash})")
+    try:  # each slot on its own first: whether the rod or the chain made it
+        slots = {
+            flag: read_domain(paths, slot)
+            for flag, paths, slot in (
+                ("--source", args.source, "source"),
+                ("--constrained", args.constrained, "constrained"),
+            )
+        }
     except DatasetError as err:
         parser.error(str(err))
+    sims = {flag: simulator_of(d.model_hash) for flag, d in slots.items()}
+    if len(set(sims.values())) > 1:
+        parser.error(
+            "one slot holds the reference rod's data and the other the chain's: "
+            + "; ".join(
+                f"{flag} {', '.join(d.paths)}: {describe_arm(d)}" for flag, d in slots.items()
+            )
+            + ". Train on one simulator's data (mjx_arm.babble --backend rod for both, or a"
+            " chain backend for both)"
+        )
+    if model_hash is not None and "rod" in sims.values():
+        parser.error(
+            f"--model {args.model}: the data were simulated by the reference rod"
+            f" ({slots['--source'].model_hash}), which no MJCF made; leave --model out"
+        )
+    for flag, d in slots.items():  # as `read_translation_files`, each slot read once
+        if model_hash is not None and d.model_hash != model_hash:
+            parser.error(
+                f"{flag} {', '.join(d.paths)}: simulated with model {d.model_hash}, expected"
+                f" {model_hash} (--model {args.model} has model hash {model_hash})"
+            )
+    d_s, d_c = slots["--source"], slots["--constrained"]
+    if d_s.model_hash != d_c.model_hash:
+        parser.error(
+            "source and constrained files come from different arms (model hashes differ:"
+            f" another MJCF, e.g. another segment count): {', '.join(d_s.paths)}"
+            f" ({d_s.model_hash}) vs {', '.join(d_c.paths)} ({d_c.model_hash})"
+        )
+    return d_s, d_c

@@ -16,6 +16,9 @@ if TYPE_CHECKING:
 
 #: Where `TrainConfig.k_choice` scores the hold factors.
 K_CHOICES = ("simulator", "forward")
+#: The simulators `TrainConfig.k_choice_simulator` can name: the fitted chain (`mjx_arm.load`)
+#: or the reference rod (`mjx_arm.load_rod`).
+K_CHOICE_SIMULATORS = ("chain", "rod")
 #: The held-out programs `TrainConfig.k_choice_programs` can name.
 K_CHOICE_PROGRAMS = ("babbling", "shape_like")
 #: The feedback rollouts `TrainConfig.feedback_impl` can name.
@@ -96,6 +99,15 @@ class TrainConfig:
     #: shapes: a translator can beat stretch only there and lose on the shapes
     #: (docs/ccgan_study.md).
     k_choice_programs: str = "babbling"
+    #: The simulator k_choice "simulator" scores in: "chain" (the fitted chain of `--model`,
+    #: MuJoCo C) or "rod" (the reference Cosserat rod of the paper's law, `mjx_arm.load_rod`,
+    #: float64), which must be the simulator the training data came from (`ccgan.train` refuses
+    #: a mix). The rod is latency-bound: one scoring's rollouts go as one padded batch on a GPU
+    #: and cost about the longest program, k_choice_seconds x max(hold_factors) simulated s at
+    #: ~7 simulated s per wall s on one H200 (20 s x k = 30: ~90 s), so a run costs that once per
+    #: scoring (epochs / stretch_every + 2); on a CPU, the sum of every rollout at ~25-35
+    #: simulated s per wall s (`ccgan.sim_choice`).
+    k_choice_simulator: str = "chain"
     #: Shape-like programs drawn when k_choice_programs is "shape_like".
     k_choice_n_programs: int = 12
     #: Physics steps per control period of the arm k_choice "simulator" scores in (0: the arm's
@@ -186,6 +198,17 @@ class TrainConfig:
                 "k_choice_programs",
                 f"must be one of {K_CHOICE_PROGRAMS}, got {self.k_choice_programs!r}",
             )
+        if self.k_choice_simulator not in K_CHOICE_SIMULATORS:
+            raise ConfigError(
+                "k_choice_simulator",
+                f"must be one of {K_CHOICE_SIMULATORS}, got {self.k_choice_simulator!r}",
+            )
+        if self.k_choice_simulator == "rod" and self.k_choice_substeps:
+            raise ConfigError(
+                "k_choice_substeps",
+                "is the chain's planning copy; the rod (k_choice_simulator 'rod') has none:"
+                f" give 0, got {self.k_choice_substeps}",
+            )
         if self.k_choice_programs == "shape_like" and not self.k_choice_seconds:
             raise ConfigError(
                 "k_choice_seconds", "must be > 0 with k_choice_programs shape_like (their length)"
@@ -227,7 +250,14 @@ class TrainConfig:
         return max(self.hold_factors)
 
     def to_dict(self) -> dict:
-        return json.loads(json.dumps(dataclasses.asdict(self)))
+        """The settings as JSON values. `k_choice_simulator` is left out when it is "chain",
+        the only simulator before the field existed: so every stored run, forward model and
+        translator file (checkpoint metadata compares these dicts) still matches and resumes;
+        `from_dict` gives it back."""
+        d = json.loads(json.dumps(dataclasses.asdict(self)))
+        if d["k_choice_simulator"] == "chain":
+            del d["k_choice_simulator"]
+        return d
 
     @classmethod
     def from_dict(cls, config: dict) -> TrainConfig:

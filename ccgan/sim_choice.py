@@ -12,6 +12,18 @@ of `TrainConfig.hold_factors`.
 It runs on the host between epochs (`ccgan.train.train_and_evaluate`): before training, every
 `stretch_every` epochs and after the last. The rollouts are MuJoCo C on the host's cores by
 default (every k is another program length, which MJX would compile once each).
+
+With `TrainConfig.k_choice_simulator` "rod" the target-domain simulator is the reference rod
+(`mjx_arm.load_rod(target domain)`, float64; and with k_choice_programs "shape_like" the D_s
+targets come from `load_rod("source")`), as the authors' code scores k in its own rod simulator;
+the training data must then be the rod's too (`simulator_of` their model hash). The rod is
+latency-bound, so all (seed, program, k) rollouts of one scoring run through
+`tracking.held.rollout_grouped(rod, jobs, "rod")`: on a GPU as one padded batch (each program
+held at its last command up to the longest; the rod is causal, so each keeps its own poses),
+costing about the longest program, k_choice_seconds x max(hold_factors) periods (20 s x k = 30
+= 600 simulated s: ~80-100 s on one H200 for up to ~64 rollouts); on a CPU group by group,
+costing the sum of all rollouts at ~25-35 simulated s per wall s (3 seeds x 3 programs of 20 s
+at k = 5..30: ~19,000 simulated s, ~10 min per scoring on 2 cores: use a GPU).
 """
 
 from __future__ import annotations
@@ -50,6 +62,25 @@ class Choice(NamedTuple):
     errors_cm: np.ndarray
 
 
+def simulator_of(model_hash: str | None) -> str:
+    """The simulator an arm or a dataset's model hash names: "rod" for the reference rod
+    (`mjx_arm.RodArm.model_hash`, "rod-..."), "chain" for an MJCF's (`mjx_arm.Arm.model_hash`)."""
+    return "rod" if str(model_hash or "").startswith("rod-") else "chain"
+
+
+def _check_simulator(arm, config: TrainConfig, what: str) -> str:
+    """The simulator of `arm` (`simulator_of`), refused (ValueError) unless it is
+    `config.k_choice_simulator`."""
+    found = simulator_of(getattr(arm, "model_hash", None))
+    if found != config.k_choice_simulator:
+        make = "mjx_arm.load_rod(domain)" if config.k_choice_simulator == "rod" else "mjx_arm.load"
+        raise ValueError(
+            f"k_choice_simulator is {config.k_choice_simulator!r}, but {what} is the {found}'s"
+            f" (model hash {getattr(arm, 'model_hash', None)}): pass the arm of {make}"
+        )
+    return found
+
+
 #: The split of `mjx_arm.programs.shape_like_programs` the shape-like held-out programs come
 #: from (disjoint from the fine-tuning, distillation and study splits; never a test shape).
 SHAPE_LIKE_SPLIT = "k_choice"
@@ -73,7 +104,8 @@ def shape_like_samples(source_arm, data: TranslationData, config: TrainConfig) -
 
     `config.k_choice_n_programs` programs of `config.k_choice_seconds` (split `SHAPE_LIKE_SPLIT`,
     seed 0, full scale as the shapes are), each run from rest in the source-domain arm (MuJoCo
-    C); their poses are the targets, normalised with the training data's pose bounds.
+    C, or the rod for a `mjx_arm.RodArm`); their poses are the targets, normalised with the
+    training data's pose bounds.
     """
     programs = shape_like_programs(
         config.k_choice_n_programs,
@@ -82,7 +114,8 @@ def shape_like_samples(source_arm, data: TranslationData, config: TrainConfig) -
         split=SHAPE_LIKE_SPLIT,
         full_scale=True,
     )
-    poses = source_arm.rollout(programs.astype(np.float64), backend="c")
+    backend = "rod" if simulator_of(getattr(source_arm, "model_hash", None)) == "rod" else "c"
+    poses = source_arm.rollout(programs.astype(np.float64), backend=backend)
     return samples(programs, poses, data.bounds)
 
 
@@ -91,16 +124,23 @@ class SimulatorChoice:
 
     Args:
       arm: the target-domain arm (`mjx_arm.load(..., domain="constrained")` or "aged"), the one
-        the training data's target domain was simulated on.
+        the training data's target domain was simulated on; with `config.k_choice_simulator`
+        "rod", the rod (`mjx_arm.load_rod(domain)`). Another simulator than the config names is
+        refused.
       data: the prepared training data. With `TrainConfig.k_choice_programs` "babbling" its
         held-out D_s trajectories (`data.source.val`, the babbling programs `TrainConfig.n_val`
         kept out of training, each run from rest) are translated and their recorded D_s poses
         are the targets; with "shape_like", `shape_like_samples` (its pose bounds normalise).
       config: the run's settings (generator widths, `hold_factors`, `k_choice_seconds`).
-      backend: "c" (MuJoCo C, one thread per trajectory) or "mjx".
+      backend: the chain's "c" (MuJoCo C, one thread per trajectory) or "mjx"; for the rod
+        "rod". None: "c", or "rod" for the rod.
       progress: label of a progress bar over the rollouts, or None for none.
-      source_arm: the source-domain arm, needed with k_choice_programs "shape_like" (it
-        simulates the programs' targets).
+      source_arm: the source-domain arm (of the same simulator), needed with
+        k_choice_programs "shape_like" (it simulates the programs' targets).
+
+    Raises:
+      ValueError: `arm` or `source_arm` is not of `config.k_choice_simulator`, a chain backend
+        for the rod, or no `source_arm` with k_choice_programs "shape_like".
     """
 
     def __init__(
@@ -108,16 +148,25 @@ class SimulatorChoice:
         arm,
         data: TranslationData,
         config: TrainConfig,
-        backend: str = "c",
+        backend: str | None = None,
         progress: str | None = None,
         source_arm=None,
     ):
+        simulator = _check_simulator(arm, config, "the target-domain arm")
+        if backend is None:
+            backend = "rod" if simulator == "rod" else "c"
+        if (backend == "rod") != (simulator == "rod"):
+            raise ValueError(f"backend {backend!r} is not the {simulator}'s")
         if config.k_choice_programs == "shape_like":
             if source_arm is None:
+                make = (
+                    'load_rod("source")' if simulator == "rod" else 'load(model, domain="source")'
+                )
                 raise ValueError(
                     'k_choice_programs "shape_like" simulates the programs\' D_s targets: pass'
-                    ' source_arm=mjx_arm.load(model, domain="source")'
+                    f" source_arm=mjx_arm.{make}"
                 )
+            _check_simulator(source_arm, config, "source_arm")
             val = shape_like_samples(source_arm, data, config)
         else:
             val = np.asarray(data.source.val)
@@ -146,7 +195,8 @@ class SimulatorChoice:
     def errors_of_commands(self, commands_bar: np.ndarray) -> np.ndarray:
         """Mean X_err (cm) of commands [S, n_val, T, 3] (bar) held k periods, [S, K].
 
-        Every (seed, program, k) is one rollout from rest; rollouts of one k run as one batch.
+        Every (seed, program, k) is one rollout from rest; rollouts of one k run as one batch
+        (the rod on a GPU: all of them as one padded batch, `tracking.held.rollout_grouped`).
         """
         n_seeds, n_prog = commands_bar.shape[:2]
         flat = commands_bar.reshape(n_seeds * n_prog, *commands_bar.shape[2:])

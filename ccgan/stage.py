@@ -31,7 +31,9 @@ from ccgan.translator import (
     TRUST_FLAG,
     Translator,
     check_labels,
+    is_rod_trained,
     translator_from_checkpoint,
+    translator_labels,
 )
 from mjx_arm import constants
 
@@ -317,7 +319,13 @@ def start_stage(p: argparse.ArgumentParser, a, module: str, config: dict, argv) 
                 trust_unlabelled=a.trust_unlabelled_translators,
             )
         except checkpoint.CheckpointError as err:
-            p.error(f"--translators: {err} (--model {a.model}, --start-domain {start_domain})")
+            why = (
+                "; it was trained on the reference rod's data (mjx_arm.babble --backend rod),"
+                " and this stage simulates the chain of --model"
+                if is_rod_trained(translator_labels(meta))
+                else ""
+            )
+            p.error(f"--translators: {err} (--model {a.model}, --start-domain {start_domain}){why}")
     enable_compilation_cache()
     out = Path(a.out)
     out.mkdir(parents=True, exist_ok=True)

@@ -7,6 +7,14 @@ must belong together, and no trajectory may be both trained on and held out
 (`ccgan.data.check_slot_splits`). The settings (`TrainConfig`) live in `ccgan.config`, the flags
 made from them in `ccgan.cli`.
 
+The paper's setting in the reference rod: babble with ``python -m mjx_arm.babble --backend rod``
+(files labelled with the rod's model hash) and train with ``--k-choice-simulator rod``: k is
+then chosen in `mjx_arm.load_rod(target domain)` as the authors' code chooses it in its own
+simulator (`ccgan.sim_choice`: one padded batch per scoring on a GPU, ~80-100 s at k up to 30),
+and the translator files record the rod's model hash. Rod data with k chosen in the chain (or
+the chain's data in the rod), one slot's rod data beside the other's chain data, chain
+--forward-data beside rod data, and --model with rod data are refused before any work.
+
 The names a training script needs stay importable from here (`make_train`, `train_and_evaluate`,
 `train_forward_models`, `METRICS`, ...).
 """
@@ -32,9 +40,16 @@ from ccgan.cli import (
     cli_parser,
     config_from_args,
     data_from_args,
+    describe_arm,
     lock_output_dir,
 )
-from ccgan.config import FEEDBACK_IMPLS, K_CHOICE_PROGRAMS, TrainConfig, check_forward_config
+from ccgan.config import (
+    FEEDBACK_IMPLS,
+    K_CHOICE_PROGRAMS,
+    K_CHOICE_SIMULATORS,
+    TrainConfig,
+    check_forward_config,
+)
 from ccgan.data import TranslationData, check_unseen, read_domain
 from ccgan.forward import ForwardConfig
 from ccgan.forward_stage import (  # noqa: F401
@@ -76,12 +91,49 @@ def load_npz(*paths: str | os.PathLike):
     return d.pressures_bar, d.poses, d.bounds
 
 
+def check_k_choice_simulator(parser, args, config: TrainConfig, d_c) -> None:
+    """Usage error unless k is chosen in the simulator the data came from (with --k-choice
+    simulator): rod data (`mjx_arm.babble --backend rod`, model hash "rod-...") need
+    --k-choice-simulator rod, the chain's need chain. A translator whose k was chosen in another
+    simulator than its data's would be tuned for a world it was not trained in, and its file's
+    model hash (the data's) would not say where k came from."""
+    from ccgan.sim_choice import simulator_of
+
+    if config.k_choice != "simulator" or args.forward_only:
+        return
+    data_sim = simulator_of(d_c.model_hash)
+    if data_sim != config.k_choice_simulator:
+        rod = "the reference rod (mjx_arm.babble --backend rod)"
+        where = rod if data_sim == "rod" else "the chain (an MJCF)"
+        parser.error(
+            f"--k-choice-simulator {config.k_choice_simulator}: the data were simulated by"
+            f" {where}, model hash {d_c.model_hash}; choose k in the data's simulator with"
+            f" --k-choice-simulator {data_sim} (or --k-choice forward)"
+        )
+
+
 def simulator_choice_from_args(parser, args, config: TrainConfig, data: TranslationData, d_c):
     """The `ccgan.sim_choice.SimulatorChoice` of --k-choice simulator: the target domain's arm
-    from --model (default `models/softarm.xml`), which must be the arm the data came from."""
+    from --model (default `models/softarm.xml`), which must be the arm the data came from; with
+    --k-choice-simulator rod, the reference rod in the target domain (`mjx_arm.load_rod`), whose
+    model hash the data must carry (`check_k_choice_simulator` has checked the simulator)."""
     import mjx_arm
     from ccgan.sim_choice import SimulatorChoice
 
+    label = None if args.no_progress else "k in the simulator"
+    if config.k_choice_simulator == "rod":
+        rod = mjx_arm.load_rod(d_c.domain)
+        if d_c.model_hash != rod.model_hash:
+            parser.error(
+                f"--k-choice-simulator rod scores k in the reference rod (model hash"
+                f" {rod.model_hash}), but the data come from a rod with hash {d_c.model_hash}"
+                " (other physical values): babble again with python -m mjx_arm.babble"
+                " --backend rod"
+            )
+        source_rod = None
+        if config.k_choice_programs == "shape_like":
+            source_rod = mjx_arm.load_rod("source")
+        return SimulatorChoice(rod, data, config, progress=label, source_arm=source_rod)
     arm = mjx_arm.load(args.model, domain=d_c.domain)
     if d_c.model_hash is not None and d_c.model_hash != arm.model_hash:
         parser.error(
@@ -89,7 +141,6 @@ def simulator_choice_from_args(parser, args, config: TrainConfig, data: Translat
             f" data come from an arm with hash {d_c.model_hash}: pass that arm's MJCF as --model"
         )
     arm = arm.planning_copy(config.k_choice_substeps)
-    label = None if args.no_progress else "k in the simulator"
     source_arm = None
     if config.k_choice_programs == "shape_like":
         source_arm = mjx_arm.load(args.model, domain="source")
@@ -106,9 +157,15 @@ def forward_splits_from_args(parser, args, config: TrainConfig, data, d_s, d_c) 
     forward_c = None
     if args.forward_data:
         try:
-            forward_c = read_domain(args.forward_data, "constrained", d_c.model_hash)
+            forward_c = read_domain(args.forward_data, "constrained")
         except DatasetError as err:
             parser.error(f"--forward-data: {err}")
+        if forward_c.model_hash != d_c.model_hash:  # another arm, or the rod beside the chain
+            parser.error(
+                f"--forward-data {', '.join(forward_c.paths)}: simulated by"
+                f" {describe_arm(forward_c)}, but --constrained by {describe_arm(d_c)}; F_c must"
+                " learn the arm the CCGAN's data come from"
+            )
         try:  # F_c is scored on the CCGAN's held-out D_c programs: it must not train on them
             check_unseen(d_c, config.n_val, forward_c, "--forward-data")
         except DatasetError as err:
@@ -176,7 +233,11 @@ def build_parser() -> argparse.ArgumentParser:
     add_config_flags(
         parser,
         TrainConfig,
-        choices={"feedback_impl": FEEDBACK_IMPLS, "k_choice_programs": K_CHOICE_PROGRAMS},
+        choices={
+            "feedback_impl": FEEDBACK_IMPLS,
+            "k_choice_programs": K_CHOICE_PROGRAMS,
+            "k_choice_simulator": K_CHOICE_SIMULATORS,
+        },
     )
     return parser
 
@@ -200,6 +261,7 @@ def main(argv=None) -> None:
         parser.error(f"--seeds must be distinct, got {args.seeds}")
     lock_output_dir(parser, "--workdir", args.workdir)  # one trainer per workdir
     d_s, d_c = data_from_args(parser, args)
+    check_k_choice_simulator(parser, args, config, d_c)
     try:
         split_notes = data_lib.check_slot_splits(config.n_val, d_s, d_c)
     except DatasetError as err:

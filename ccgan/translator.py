@@ -58,7 +58,9 @@ MAX_COMMAND_BAR = 10.0
 METHODS = ("ccgan", "wcgan", "finetune", "distill", "distill_from_wcgan", "distill_from_finetune")
 #: What a translator file says it is, each a metadata key: its method, the domains it translates
 #: from and into (mjx_arm.DOMAINS names: "source" -> "constrained" or "aged") and the
-#: `mjx_arm.Arm.model_hash` of the arm it was trained (or last refined) on.
+#: `mjx_arm.Arm.model_hash` of the arm it was trained (or last refined) on; a translator
+#: trained on the reference rod's data (`mjx_arm.babble --backend rod`) records the rod's
+#: `mjx_arm.RodArm.model_hash` ("rod-...", `is_rod_trained`), never an MJCF's.
 LABELS = ("method", "source_domain", "target_domain", "model_hash")
 #: The flag of every command that loads translators which lets files without LABELS through.
 TRUST_FLAG = "--trust-unlabelled-translators"
@@ -83,6 +85,12 @@ def translator_labels(meta: dict) -> dict:
     if stage_hash:
         labels["model_hash"] = stage_hash
     return labels
+
+
+def is_rod_trained(labels: dict) -> bool:
+    """Whether a translator file's labels (`translator_labels`) say it was trained (or last
+    refined) on the reference rod's data: its model hash is a `mjx_arm.RodArm.model_hash`."""
+    return str(labels.get("model_hash", "")).startswith("rod-")
 
 
 def missing_labels(meta: dict) -> list[str]:
@@ -221,7 +229,9 @@ def save_translator(
 
     The file records its `LABELS`: the method (from `config.baseline`: "wcgan" or "ccgan"),
     `domains` (source, target: the training data's domain names) and `model_hash`
-    (`mjx_arm.Arm.model_hash` of the arm the data was simulated with), so that
+    (`mjx_arm.Arm.model_hash` of the arm the data was simulated with; the rod's
+    `RodArm.model_hash` for the rod's data, whose config then names k_choice_simulator "rod"
+    if k was chosen in a simulator), so that
     `load_translator` and the commands can refuse it for another method, domain or arm. Without
     `domains` or `model_hash` the file is unlabelled (`check_labels` refuses it unless trusted).
     """
