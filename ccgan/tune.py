@@ -124,6 +124,11 @@ def main(argv=None) -> None:
         print("wrote", ", ".join(str(p) for p in paths.values()))
         return
     base = config_from_args(parser, args, TrainConfig, skip=TUNED)
+    if base.k_choice_simulator != "chain":
+        parser.error(
+            "--k-choice-simulator rod: a study scores its trials in the chain's D_c arm only;"
+            " train on the rod's data with python -m ccgan.train --k-choice-simulator rod"
+        )
     fconf = config_from_args(
         parser, args, forward_lib.ForwardConfig, prefix="forward-", check=check_forward_config
     )

@@ -143,6 +143,7 @@ def test_batch_equals_one_setting_at_a_time_and_refuses_mixed_structures(small_a
         (["--trials-per-batch", "0"], "--trials-per-batch"),
         (["--space-critic-steps", "0"], "--space-critic-steps"),
         (["--model", "models/softarm.xml"], "hash"),
+        (["--k-choice-simulator", "rod"], "--k-choice-simulator rod"),
     ],
 )
 def test_bad_options_stop_before_any_trial(small_arm_files, tmp_path, flags, named, capsys):
