@@ -255,3 +255,45 @@ def test_run_header_names_a_cpu_once_and_a_gpu_by_its_kind(monkeypatch):
     header = bench.run_header("bench.x", ["--a"])
     assert header["device"] == "gpu: NVIDIA H100 80GB HBM3"
     assert header["command"] == "python -m bench.x --a"
+
+
+def test_rod_tables_run_the_stages_commands_with_the_committed_chain_translators(tmp_path):
+    device = tmp_path / "device"  # the copy of the tree on the GPU machine
+    (device / "tools" / "device").mkdir(parents=True)
+    shutil.copy(DEVICE / "rod_tables.sh", device / "tools" / "device")
+    tmp = tmp_path / "tmp"
+    stub = tmp_path / "python"  # records its arguments, writes the --out folder
+    stub.write_text('#!/bin/bash\necho "$@" >>"$DEVICE_TMP/calls"\nmkdir -p "${@: -1}"\n')
+    stub.chmod(0o755)
+    (device / "tools" / "device" / "install.sh").write_text(
+        f'TMP=$DEVICE_TMP; OUT=$TMP/out; PY={stub}; mkdir -p "$OUT"\n'
+    )
+    env = os.environ | {"DEVICE_TMP": str(tmp), "CHAIN_RUN": "chain"}
+    script = ["bash", "tools/device/rod_tables.sh"]
+
+    def call(which):
+        return subprocess.run(
+            script, cwd=device, env=env | {"WHICH": which}, capture_output=True, text=True
+        )
+
+    assert call("rod_tables").returncode == 2
+    missing = call("rod_table_aged")
+    assert missing.returncode == 1 and "chain/aged_sim/translator.ckpt" in missing.stdout
+    for name in ("chain/aged_sim", "chain/ccgan_sim"):
+        (device / name).mkdir(parents=True)
+        (device / name / "translator.ckpt").write_text("")
+    missing = call("rod_table rod_table_aged")  # the rod's trainings have not run
+    assert missing.returncode == 1 and "rod_ccgan/translator.ckpt" in missing.stdout
+    for name in ("rod_ccgan", "rod_wcgan"):
+        (tmp / "paper" / name).mkdir(parents=True)
+        (tmp / "paper" / name / "translator.ckpt").write_text("")
+    done = call("rod_table rod_table_aged")
+    assert done.returncode == 0, done.stdout + done.stderr
+    calls = (tmp / "calls").read_text().splitlines()
+    assert len(calls) == 2 and all("-m eval.shapes --simulator rod" in c for c in calls)
+    aged = next(c for c in calls if "--target-domain aged" in c)
+    assert "--distilled-path chain/aged_sim/translator.ckpt" in aged
+    assert sorted(p.name for p in (tmp / "out").iterdir()) == [
+        "rod_tables_rod_table.tar.gz",
+        "rod_tables_rod_table_aged.tar.gz",
+    ]
