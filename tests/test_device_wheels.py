@@ -287,10 +287,13 @@ def test_rod_tables_run_the_stages_commands_with_the_committed_chain_translators
     for name in ("rod_ccgan", "rod_wcgan"):
         (tmp / "paper" / name).mkdir(parents=True)
         (tmp / "paper" / name / "translator.ckpt").write_text("")
+    (tmp / "paper" / "rod_tracker").mkdir()
     done = call("rod_table rod_table_aged")
     assert done.returncode == 0, done.stdout + done.stderr
     calls = (tmp / "calls").read_text().splitlines()
     assert len(calls) == 2 and all("-m eval.shapes --simulator rod" in c for c in calls)
+    table = next(c for c in calls if "--target-domain" not in c)
+    assert f"--caches-from {tmp}/paper/rod_tracker" in table
     aged = next(c for c in calls if "--target-domain aged" in c)
     assert "--distilled-path chain/aged_sim/translator.ckpt" in aged
     assert sorted(p.name for p in (tmp / "out").iterdir()) == [

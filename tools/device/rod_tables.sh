@@ -5,7 +5,8 @@
 # chain run (CHAIN_RUN, default results/paper/rerun_2026-11-27/run) instead of this run's own, so
 # the rod's stages can be measured without running the whole chain again. rod_table needs the
 # rod's trainings done by tools/device/chain.sh in this warm machine ($TMP/paper, STAGES="rod_data
-# rod_data_long rod_forward rod_ccgan rod_wcgan"); rod_table_aged needs nothing but the tree, so
+# rod_data_long rod_tracker rod_forward rod_ccgan rod_wcgan"; rod_tracker's cache is read when
+# there); rod_table_aged needs nothing but the tree, so
 # it can run beside them. The tables named in WHICH run at once (the rod is latency-bound on a
 # GPU: processes share it well), each into $TMP/rod_tables/<table>/, returned as
 # $OUT/rod_tables_<table>.tar.gz (the device returns at most 8 files).
@@ -30,7 +31,9 @@ for table in $WHICH; do
     args=(--methods none stretch ccgan wcgan ccgan_sim mpc
       --ccgan-path "$RUN_DIR/rod_ccgan/translator.ckpt"
       --wcgan-path "$RUN_DIR/rod_wcgan/translator.ckpt"
-      --distilled-path "$CHAIN_RUN/ccgan_sim/translator.ckpt") ;;
+      --distilled-path "$CHAIN_RUN/ccgan_sim/translator.ckpt")
+    # The tracker planned by the rod_tracker stage, as the stage's --caches-from reads it.
+    [[ -d $RUN_DIR/rod_tracker ]] && args+=(--caches-from "$RUN_DIR/rod_tracker") ;;
   rod_table_aged)
     needs=("$CHAIN_RUN/aged_sim/translator.ckpt")
     args=(--target-domain aged --methods none stretch ccgan_sim
