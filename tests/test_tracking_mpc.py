@@ -82,3 +82,18 @@ def test_mpc_keeps_its_result_and_reuses_it_only_for_the_same_tracking(arms, tmp
     assert not info["reused"] and planned
     np.testing.assert_allclose(fresh, commands, rtol=0, atol=1e-12)
     assert not [p for p in tmp_path.iterdir() if p.name != path.name]  # no temporaries left
+
+
+def test_the_cache_fingerprint_ignores_rounding_but_not_a_new_target():
+    """The rod's D_s path computed on a GPU and on a CPU differs by ~1e-15 m: the tracker's
+    cache must name one tracking for both, and another for a target a micrometre away."""
+    from types import SimpleNamespace
+
+    from mjx_arm import domains
+
+    arm = SimpleNamespace(model_hash="m", domain=domains.CONSTRAINED)
+    targets = np.random.default_rng(0).uniform(-0.2, 0.2, size=(2, 5, 6))
+    init = np.full((2, 15, 3), 0.2)
+    key = mpc._fingerprint(arm, targets, init, 3, mpc.MpcConfig())
+    assert key == mpc._fingerprint(arm, targets * (1 + 2e-15), init, 3, mpc.MpcConfig())
+    assert key != mpc._fingerprint(arm, targets + 1e-6, init, 3, mpc.MpcConfig())

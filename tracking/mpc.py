@@ -218,12 +218,19 @@ def track(
     return (commands[0] if single else commands), info
 
 
+#: Decimals (of m and bar) the tracker's cache fingerprint rounds its targets and start to.
+FINGERPRINT_DECIMALS = 9
+
+
 def _fingerprint(arm_c: Arm, targets, init, k: int, cfg: MpcConfig) -> str:
     """What the tracker's commands depend on: the arm and its medium (two domains share the
     MJCF's hash, so the domain is named on its own), the targets, the start, k, the settings."""
     digest = hashlib.sha256()
     for array in (targets, init):
-        digest.update(np.ascontiguousarray(array, np.float64).tobytes())
+        # Rounded to FINGERPRINT_DECIMALS: the same float64 targets computed on another machine
+        # (the rod's D_s path on a GPU and on a CPU differ by ~1e-15 m) name the same tracking.
+        rounded = np.round(np.asarray(array, np.float64), FINGERPRINT_DECIMALS) + 0.0
+        digest.update(np.ascontiguousarray(rounded).tobytes())
     domain = getattr(arm_c, "domain", None)
     digest.update(repr((arm_c.model_hash, domain, k, dataclasses.asdict(cfg))).encode())
     return digest.hexdigest()[:16]
