@@ -2,10 +2,17 @@
 
 Read only from the finished stages' manifests and the evaluation stages' shapes.json, so the
 report can be rewritten at any time without running anything.
+
+The rod's section can also be written from loose evaluation folders (tables scored in the rod
+outside a chain, e.g. with the committed chain's translators):
+
+    python -m experiments.report --rod-table DIR --rod-aged-table DIR \
+        --chain-table results/paper/rerun_2026-11-27/run/table --out rod.md
 """
 
 from __future__ import annotations
 
+import argparse
 import json
 from pathlib import Path
 
@@ -366,22 +373,64 @@ def write(chain: Chain, config: dict, config_path: Path) -> Path:
             lines[-1] += f", the aged arm's `{AGED_TABLE_STAGE}/shapes.md`."
     rod, rod_aged = _shapes(chain, ROD_TABLE_STAGE), _shapes(chain, ROD_AGED_TABLE_STAGE)
     if rod is not None:
-        lines += [
-            "",
-            "## In the reference rod (the paper's simulator)",
-            "",
-            "The five shapes scored in the reference Cosserat rod (`eval.shapes --simulator"
-            " rod`, float64): the rod's own D_s path is the target; CCGAN-GP and WCGAN-GP"
-            " learnt from the rod's babbling with k chosen in the rod; the distilled translator"
-            " and the tracker were taught or planned in the chain and run in the rod. X_err (cm)"
-            " / phi_err (rad), then % of the shape's excursion:",
-            "",
-            *readme_tables(rod, ROD_NAMES),
-            "",
-            *rod_lines(rod, results, rod_aged),
-        ]
-        if rod_aged is not None:
-            lines += ["", "The aged arm in the rod:", "", *readme_tables(rod_aged, ROD_NAMES)]
+        lines += ["", "## In the reference rod (the paper's simulator)", ""]
+        lines += rod_section(rod, results, rod_aged)
     path = chain.out / "paper.md"
     path.write_text("\n".join(lines) + "\n")
     return path
+
+
+def rod_section(rod: dict, chain_results: dict | None, rod_aged: dict | None) -> list[str]:
+    """The rod's tables (shapes.json contents of `eval.shapes --simulator rod`), their targets,
+    and what going from the chain (`chain_results`, its table scored in the chain) costs."""
+    lines = [
+        "The five shapes scored in the reference Cosserat rod (`eval.shapes --simulator rod`,"
+        " float64): the rod's own D_s path is the target; CCGAN-GP and WCGAN-GP learnt from the"
+        " rod's babbling with k chosen in the rod; the distilled translator and the tracker were"
+        " taught or planned in the chain and run in the rod. X_err (cm) / phi_err (rad), then %"
+        " of the shape's excursion:",
+        "",
+        *readme_tables(rod, ROD_NAMES),
+        "",
+        *rod_lines(rod, chain_results, rod_aged),
+    ]
+    if rod_aged is not None:
+        lines += ["", "The aged arm in the rod:", "", *readme_tables(rod_aged, ROD_NAMES)]
+    return lines
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Writes the rod's section from loose evaluation folders (see the module docstring)."""
+    parser = argparse.ArgumentParser(
+        prog="python -m experiments.report",
+        description="the rod's tables, targets and chain-to-rod costs, from eval.shapes folders",
+    )
+    parser.add_argument("--rod-table", required=True, type=Path, help="eval.shapes --simulator rod")
+    parser.add_argument("--rod-aged-table", type=Path, help="the same with --target-domain aged")
+    parser.add_argument("--chain-table", type=Path, help="the same shapes scored in the chain")
+    parser.add_argument("--out", required=True, type=Path, help="the markdown file to write")
+    args = parser.parse_args(argv)
+    loaded = {}
+    for flag in ("rod_table", "rod_aged_table", "chain_table"):
+        folder = getattr(args, flag)
+        if folder is None:
+            loaded[flag] = None
+            continue
+        path = folder / "shapes.json"
+        if not path.is_file():
+            parser.error(f"--{flag.replace('_', '-')} {folder}: no shapes.json there")
+        loaded[flag] = json.loads(path.read_text())
+    if loaded["rod_table"].get("simulator") != "rod":
+        parser.error(f"--rod-table {args.rod_table}: not scored in the rod (--simulator rod)")
+    text = "\n".join(
+        ["# The five shapes in the reference rod", ""]
+        + rod_section(loaded["rod_table"], loaded["chain_table"], loaded["rod_aged_table"])
+    )
+    args.out.parent.mkdir(parents=True, exist_ok=True)
+    args.out.write_text(text + "\n")
+    print(f"wrote {args.out}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -372,6 +372,26 @@ def test_report_checks_the_rod_tables_and_what_the_rod_costs():
     assert "CCGAN-GP (rod's data) (k = 20)" in header and "paper Table I" in header
 
 
+def test_the_rod_report_is_written_from_loose_evaluation_folders(tmp_path, capsys):
+    rod = _results({"none": 5.0, "stretch": 0.5, "ccgan_sim": 0.6})
+    for shape in rod["table"].values():
+        for row in shape.values():
+            row |= {"k": 20, "target_excursion_cm": 10.0, "x_err_pct_of_excursion": 1.0}
+    chain = _results({"none": 5.0, "stretch": 0.6, "ccgan_sim": 0.3})
+    for name, results in (("rod", rod | {"simulator": "rod", "config": {}}), ("chain", chain)):
+        (tmp_path / name).mkdir()
+        (tmp_path / name / "shapes.json").write_text(json.dumps(results))
+    out = tmp_path / "rod.md"
+    argv = ["--rod-table", str(tmp_path / "rod"), "--chain-table", str(tmp_path / "chain")]
+    assert report.main([*argv, "--out", str(out)]) == 0
+    text = out.read_text()
+    assert "| circle | 5.00 / 0.100 | 0.50 / 0.100 | 0.60 / 0.100 | 2.98 / 0.276 |" in text
+    assert "- distilled, X_err in the rod / in the chain: 2.00-2.00" in text
+    with pytest.raises(SystemExit):  # a table scored in the chain is not the rod's
+        report.main(["--rod-table", str(tmp_path / "chain"), "--out", str(out)])
+    assert "not scored in the rod" in capsys.readouterr().err
+
+
 def _recorded_chain(tmp_path, stages):
     """A chain whose stages ({name: (module, args, inputs)}) all finished, as their stage.json
     records show (no command run)."""
