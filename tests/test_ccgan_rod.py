@@ -80,6 +80,7 @@ def rod_run(rod_data, tmp_path_factory):
     return workdir
 
 
+@pytest.mark.slow  # a whole ccgan.train run on this CPU: 50-170 s (docs/testing.md)
 def test_training_on_rod_data_chooses_k_in_the_rod_and_labels_the_translator(rod_run):
     rod, workdir = mjx_arm.load_rod("constrained"), rod_run
     rows = train_lib.read_rows(workdir / "k_choices.csv")
@@ -172,6 +173,7 @@ def test_simulator_mixes_are_refused_before_any_work(rod_data, chain_files, tmp_
     assert not workdir.exists()
 
 
+@pytest.mark.slow  # a whole ccgan.train run on this CPU: 50-170 s (docs/testing.md)
 def test_the_chains_stages_refuse_a_rod_trained_translator(rod_run, tmp_path, capsys):
     """ccgan.distill simulates the chain: a rod-trained translator is refused, saying why."""
     out = tmp_path / "out"
