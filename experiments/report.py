@@ -383,12 +383,18 @@ def write(chain: Chain, config: dict, config_path: Path) -> Path:
 def rod_section(rod: dict, chain_results: dict | None, rod_aged: dict | None) -> list[str]:
     """The rod's tables (shapes.json contents of `eval.shapes --simulator rod`), their targets,
     and what going from the chain (`chain_results`, its table scored in the chain) costs."""
+    methods = rod["methods_run"]
+    gans = [n for m, n in (("ccgan", "CCGAN-GP"), ("wcgan", "WCGAN-GP")) if m in methods]
+    learnt = (
+        f"{' and '.join(gans)} learnt from the rod's babbling with k chosen in the rod"
+        if gans
+        else "no GAN trained on the rod's data is in this table"
+    )
     lines = [
         "The five shapes scored in the reference Cosserat rod (`eval.shapes --simulator rod`,"
-        " float64): the rod's own D_s path is the target; CCGAN-GP and WCGAN-GP learnt from the"
-        " rod's babbling with k chosen in the rod; the distilled translator and the tracker were"
-        " taught or planned in the chain and run in the rod. X_err (cm) / phi_err (rad), then %"
-        " of the shape's excursion:",
+        f" float64): the rod's own D_s path is the target, stretch only's k is chosen in the"
+        f" rod; {learnt}; the distilled translator and the tracker were taught or planned in the"
+        " chain and run in the rod. X_err (cm) / phi_err (rad), then % of the shape's excursion:",
         "",
         *readme_tables(rod, ROD_NAMES),
         "",
