@@ -91,6 +91,7 @@ def test_tiny_study_in_batches_scores_in_the_simulator_and_resumes(small_arm_fil
     assert "| 5 | 1 | False | 3 |" in text and "| 5 | 1 | True | 1 |" in text
 
 
+@pytest.mark.slow  # CI's slowest test (two vmapped trainings compile; docs/testing.md)
 def test_batch_equals_one_setting_at_a_time_and_refuses_mixed_structures(small_arm_files):
     """Members of a vmapped batch do not interact: reordered, each gives the same result."""
     import dataclasses
