@@ -168,14 +168,22 @@ def stop_all(attempts: list[Attempt]) -> None:
 
 
 @functools.cache
-def machine() -> str:
-    """The host's CPU and JAX's first device, asked in a child process: a JAX backend started
-    here would hold accelerator memory that the stages' own processes need."""
+def jax_device() -> str:
+    """JAX's default backend and first device, e.g. "gpu (NVIDIA H100 80GB HBM3)", asked in a
+    child process ("unknown" if that fails): a JAX backend started here would hold accelerator
+    memory that the stages' own processes need."""
     probe = "import jax; d = jax.devices()[0]; print(f'{jax.default_backend()} ({d.device_kind})')"
     try:
-        device = subprocess.run(
-            [sys.executable, "-c", probe], capture_output=True, text=True, timeout=120
-        ).stdout.strip()
+        return (
+            subprocess.run(
+                [sys.executable, "-c", probe], capture_output=True, text=True, timeout=120
+            ).stdout.strip()
+            or "unknown"
+        )
     except (OSError, subprocess.TimeoutExpired):
-        device = "unknown"
-    return f"{cpu_model()}, {os.cpu_count()} cores; JAX: {device}"
+        return "unknown"
+
+
+def machine() -> str:
+    """The host's CPU and JAX's first device (`jax_device`)."""
+    return f"{cpu_model()}, {os.cpu_count()} cores; JAX: {jax_device()}"

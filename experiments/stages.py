@@ -32,6 +32,7 @@ from experiments.attempt import (
     _attempts_to_continue,
     _move_aside,
     die_with_parent,
+    jax_device,
     machine,
     stop_all,
 )
@@ -53,6 +54,8 @@ from experiments.chain import (
     shown_command,
     upstream,
 )
+from mjx_arm.machine import usable_cores
+from mjx_arm.rod_arm import HOST_DEVICES_FLAG
 
 __all__ = [
     "ATTEMPTS_SUFFIX",
@@ -188,10 +191,17 @@ def run_stage(
 def _child_env(jobs: int) -> dict:
     """The commands' environment. With several at once on one accelerator, each JAX process
     takes GPU memory as it needs it instead of preallocating most of it (JAX's default), unless
-    the caller chose a policy."""
+    the caller chose a policy. On an accelerator each process also gets one JAX CPU device per
+    usable core (`mjx_arm.rod_arm.HOST_DEVICES_FLAG`), unless XLA_FLAGS names a count: the
+    reference rod then runs on the host's cores, where latency-bound processes run side by side,
+    instead of time-slicing the GPU (`mjx_arm.rod_arm.host_devices`); nothing else uses them."""
     env = dict(os.environ)
     if jobs > 1 and not any(k in env for k in GPU_MEMORY_POLICY):
         env["XLA_PYTHON_CLIENT_PREALLOCATE"] = "false"
+    flags = env.get("XLA_FLAGS", "")
+    on_accelerator = jax_device().split(" ")[0] not in ("cpu", "unknown")
+    if on_accelerator and HOST_DEVICES_FLAG not in flags:
+        env["XLA_FLAGS"] = f"{flags} {HOST_DEVICES_FLAG}={usable_cores()}".strip()
     return env
 
 

@@ -36,6 +36,7 @@ import hashlib
 import jax
 import jax.numpy as jnp
 import numpy as np
+from jax.sharding import Mesh, NamedSharding, PartitionSpec
 
 from mjx_arm import checks, cosserat, domains, valve
 from mjx_arm.arm import SimulationDivergedError
@@ -53,6 +54,33 @@ AGREEMENT_FRACTION_OF_L = 1e-6
 #: Physics steps per loop iteration by JAX backend when `RodArm.unroll` is None
 #: (bench/results/h200/rod_unroll: 10 gives 1.25-1.36x at batches 1-512 on one H200).
 DEFAULT_UNROLL = {"gpu": 10, "cpu": 1}
+#: Trajectories per host CPU device in one call when the rod runs on the host's cores
+#: (`host_devices`): 4 per device ran 1.5x the simulated s per core of 1 per device on a 2-core
+#: CPU, and 8 no better (SIMD across the batch; bench.rod_host, bench/results/cpu/rod_host).
+HOST_BATCH_PER_DEVICE = 4
+#: Most trajectories in one rod call on an accelerator: one H200 runs the rod at ~1,090 simulated
+#: s/s at batch 512 and ~400 at 64 (nearly the time of one trajectory up to ~64), so larger
+#: batches buy little and cost memory (512 x 1,200 periods of float64 poses are ~30 MB).
+ACCELERATOR_BATCH = 512
+#: The XLA flag that gives JAX several host CPU devices (set before JAX starts).
+HOST_DEVICES_FLAG = "--xla_force_host_platform_device_count"
+
+
+def host_devices() -> list:
+    """The host's CPU devices that the rod splits its batches over, or [] for JAX's default device.
+
+    The rod is latency-bound (500 sequential float64 steps per 0.1 s period): processes sharing one
+    GPU time-slice it (bench/results/h200/rod_sharing: the sum stays at one process's ~70
+    simulated s/s), while each host core runs one at ~28 (16 cores: 342 summed). So when JAX has
+    more than one CPU device, which it has only when `HOST_DEVICES_FLAG`=N is in XLA_FLAGS before it
+    starts (`experiments.paper` sets N to the usable cores for its stages on an accelerator), every
+    `RodArm.rollout` shards its batch across them, one thread each, whatever the default backend.
+    """
+    try:
+        cpus = jax.devices("cpu")
+    except RuntimeError:  # JAX_PLATFORMS without the CPU
+        return []
+    return cpus if len(cpus) > 1 else []
 
 
 def rod_params(
@@ -163,13 +191,29 @@ class RodArm:
         state = cosserat.rest_state(self.params)
         return np.concatenate([state.x[-1], state.q[-1, 2]])
 
+    def placement(self) -> str:
+        """Where `rollout` runs: "host" (split over `host_devices`) or JAX's default backend."""
+        return "host" if host_devices() else jax.default_backend()
+
+    def call_size(self) -> int | None:
+        """The batch one rollout call should take to use the machine, for callers that split or pad
+        many trajectories (`tracking.held.rollout_grouped`, `mjx_arm.babble.rod`): on the host's
+        devices `HOST_BATCH_PER_DEVICE` per device; on an accelerator `ACCELERATOR_BATCH` (a call
+        costs about its longest trajectory up to ~64); None on one CPU device (cost ~ total
+        simulated time, so no padding pays)."""
+        where = self.placement()
+        if where == "host":
+            return HOST_BATCH_PER_DEVICE * len(host_devices())
+        return None if where == "cpu" else ACCELERATOR_BATCH
+
     def rollout_fn(self):
         """The jitted, vmapped rollout `fn(commands [B, T, 3]) -> poses [B, T, 6]` in `dtype`.
 
         Commands must already be in `dtype` (float64 ones need `jax.enable_x64(True)` around the
-        call); no checks are made. `rollout` is the checked entry point.
+        call) and on their device; no checks are made. `rollout` is the checked entry point.
         """
-        unroll = self.unroll or DEFAULT_UNROLL.get(jax.default_backend(), 1)
+        where = self.placement()
+        unroll = self.unroll or DEFAULT_UNROLL.get("cpu" if where == "host" else where, 1)
         return _batched_rollout(self.params, self.dtype, self.valve, unroll)
 
     def rollout(self, pressures_bar, backend: str | None = None) -> np.ndarray:
@@ -183,8 +227,8 @@ class RodArm:
           pressures_bar: [T, 3] or [B, T, 3] chamber commands (bar) at 10 Hz.
           backend: None or "rod", so that code written for `Arm.rollout(p, backend=...)` (e.g.
             `tracking.held.rollout_grouped`) runs the rod too; the rod has one simulator (JAX,
-            on JAX's default device), so the chain's "c" and "mjx" are refused rather than
-            silently run in the rod.
+            on JAX's default device or the host's, `host_devices`), so the chain's "c" and
+            "mjx" are refused rather than silently run in the rod.
 
         Returns:
           [T, 6] or [B, T, 6] float64 poses: tip position (m) then unit d3.
@@ -203,7 +247,8 @@ class RodArm:
             raise ValueError("pressures_bar is boolean; give pressures in bar (numbers)")
         batched = checks.check_pressures(pressures_bar)
         with jax.enable_x64(self.dtype == "float64"):
-            poses = np.asarray(self.rollout_fn()(jnp.asarray(batched, self.dtype)), np.float64)
+            poses = np.asarray(self.rollout_fn()(_placed(batched, self.dtype)), np.float64)
+        poses = poses[: len(batched)]
         ok = np.isfinite(poses).all(axis=-1)  # [B, T]
         if not ok.all():
             bad = np.flatnonzero(~ok.all(axis=1))
@@ -215,6 +260,21 @@ class RodArm:
                 first,
             )
         return poses if np.ndim(pressures_bar) == 3 else poses[0]
+
+
+def _placed(batched: np.ndarray, dtype: str):
+    """Commands [B, T, 3] as a JAX array where the rod runs: on JAX's default device, or split
+    over `host_devices` along the batch (padded to a multiple of their number by repeating the
+    last program; each trajectory is simulated on its own, so its poses do not depend on the
+    split, and the caller drops the padded rows)."""
+    devices = host_devices()
+    if not devices:
+        return jnp.asarray(batched, dtype)
+    pad = -len(batched) % len(devices)
+    if pad:
+        batched = np.concatenate([batched, np.repeat(batched[-1:], pad, axis=0)])
+    sharding = NamedSharding(Mesh(np.asarray(devices), ("batch",)), PartitionSpec("batch"))
+    return jax.device_put(np.asarray(batched, dtype), sharding)
 
 
 def load_rod(

@@ -66,6 +66,9 @@ def test_batches_one_call_on_a_gpu_small_chunks_on_a_cpu(monkeypatch):
     assert rod_babble.batch_sizes(10, 4096, on_accelerator=False) == [4, 4, 2]
     assert rod_babble.batch_sizes(10, 3, on_accelerator=False) == [3, 3, 3, 1]
     assert rod_babble.batch_sizes(0, 4, on_accelerator=False) == []
+    # On the host's devices: calls of the rod's call size, the last shorter, unpadded.
+    assert rod_babble.batch_sizes(400, 4096, on_accelerator=True, host_call=64) == [64] * 6 + [16]
+    assert rod_babble.batch_sizes(53, 32, host_call=64) == [32, 21]
 
 
 @pytest.mark.parametrize("on_accelerator", [True, False])

@@ -11,7 +11,7 @@ import json
 import numpy as np
 import pytest
 
-import mjx_arm  # noqa: F401  (before jax)
+import mjx_arm  # (before jax)
 from eval import methods, pipeline, report, rod, shapes
 from mjx_arm import constants, programs
 from tracking import held, metrics
@@ -86,7 +86,7 @@ def test_a_tiny_rod_evaluation_scores_what_the_rod_gives(in_tmp, capsys, monkeyp
     assert md == report.markdown_report(written)
     assert "D_s targets (rod)" in capsys.readouterr().err
     # A GPU's path (padded batches, each announced) scores the same.
-    monkeypatch.setattr(held, "_on_accelerator", lambda: True)
+    monkeypatch.setattr(mjx_arm.RodArm, "call_size", lambda self: 512)
     again = pipeline.evaluate(_tiny(in_tmp / "padded"), command="test", log=print)
     assert again["stretch_k"] == k
     for method in ("none", "stretch"):

@@ -737,3 +737,20 @@ def test_a_killed_chain_takes_its_command_with_it(fake):
     finally:
         if _running(child):
             os.kill(child, 9)
+
+
+def test_stages_on_an_accelerator_get_a_cpu_device_per_core_for_the_rod(monkeypatch):
+    """The rod's processes run on the host's cores when JAX has several CPU devices
+    (mjx_arm.rod_arm.host_devices): the chain gives its stages one per usable core on a GPU
+    machine only, and keeps a count the caller chose."""
+    monkeypatch.setenv("SOFTARM_THREADS", "3")
+    monkeypatch.setenv("XLA_FLAGS", "--some_flag=1")
+    monkeypatch.setattr(stages_lib, "jax_device", lambda: "gpu (NVIDIA H200)")
+    flags = stages_lib._child_env(2)["XLA_FLAGS"].split()
+    assert flags == ["--some_flag=1", "--xla_force_host_platform_device_count=3"]
+    for device in ("cpu (cpu)", "unknown"):
+        monkeypatch.setattr(stages_lib, "jax_device", lambda device=device: device)
+        assert stages_lib._child_env(2)["XLA_FLAGS"] == "--some_flag=1"
+    monkeypatch.setattr(stages_lib, "jax_device", lambda: "gpu (NVIDIA H200)")
+    monkeypatch.setenv("XLA_FLAGS", "--xla_force_host_platform_device_count=8")
+    assert stages_lib._child_env(1)["XLA_FLAGS"] == "--xla_force_host_platform_device_count=8"

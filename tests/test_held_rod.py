@@ -4,6 +4,10 @@
 Programs are 0.2-0.8 s (2-8 control periods), so each compiled shape costs about a second.
 """
 
+import os
+import subprocess
+import sys
+
 import numpy as np
 import pytest
 
@@ -20,8 +24,11 @@ def rod_c() -> mjx_arm.RodArm:
 class _Spy:
     """A rod that records the [B, N, 3] shape of every call."""
 
-    def __init__(self, rod):
-        self.rod, self.calls = rod, []
+    def __init__(self, rod, call_size=None):
+        self.rod, self.calls, self.size = rod, [], call_size
+
+    def call_size(self):
+        return self.size
 
     def rollout(self, pressures_bar, backend=None):
         self.calls.append(np.shape(pressures_bar))
@@ -47,7 +54,7 @@ def test_hold_last_pads_with_each_programs_last_command():
     np.testing.assert_array_equal(padded[1], b)
 
 
-def test_padding_changes_no_pose(rod_c, monkeypatch, capsys):
+def test_padding_changes_no_pose(rod_c, capsys):
     """Jobs of k = 1, 2, 3 and different lengths (a duplicate among them): the padded batches
     give every pose of one call per (length, k) group, to 1e-12 m in float64."""
     programs = [held_program(seed, n / 10, (1, 2)) for seed, n in ((0, 5), (1, 4), (2, 2), (3, 3))]
@@ -55,9 +62,7 @@ def test_padding_changes_no_pose(rod_c, monkeypatch, capsys):
     jobs = [(held.stretch(p, k), k) for p, k in zip(programs, (1, 2, 3, 1), strict=True)]
     jobs.append(jobs[1])  # a repetition is simulated once and copied
     grouped = held.rollout_grouped(rod_c, jobs, "rod", progress="grouped", padded=False)
-    spy = _Spy(rod_c)
-    monkeypatch.setattr(held, "ROD_CHUNK", 2)  # two calls: the 4 distinct jobs in chunks of 2
-    monkeypatch.setattr(held, "_on_accelerator", lambda: True)  # the GPU's default path
+    spy = _Spy(rod_c, call_size=2)  # as on a GPU or the host's devices: two calls of 2
     padded = held.rollout_grouped(spy, jobs, "rod", progress="padded")
     # Longest first, each chunk padded to its own longest: (8, 6 -> 8) then (5, 3 -> 5) periods.
     assert spy.calls == [(2, 8, 3), (2, 5, 3)]
@@ -73,8 +78,46 @@ def test_padding_changes_no_pose(rod_c, monkeypatch, capsys):
     for sim_s, longest_s in ((1.4, 0.8), (0.8, 0.5)):
         line = f"padded: the rod runs 2 trajectories together ({sim_s} simulated s, the longest"
         assert f"{line} {longest_s} s)" in err
-    # On a CPU the default is one call per (length, k) group, as for the chain.
-    monkeypatch.setattr(held, "_on_accelerator", lambda: False)
+    # On one CPU device (no call size) the default is one call per (length, k) group, as for
+    # the chain.
+    spy.size = None
     spy.calls.clear()
     held.rollout_grouped(spy, jobs[:2], "rod")
     assert sorted(spy.calls) == [(1, 5, 3), (1, 8, 3)]
+
+
+def test_host_devices_split_the_rod_and_change_no_pose():
+    """Two fake host CPU devices (a fresh process): `RodArm.rollout` splits 3 programs (padded to
+    4) over them, and the poses are those of one device, to 1e-12 m in float64; the grouped and
+    babbling paths take `call_size` (4 per device) calls."""
+    code = """
+import numpy as np
+import jax, mjx_arm
+from mjx_arm import rod_arm
+from mjx_arm.babble import rod as rod_babble
+from mjx_arm.programs import held_program
+from tracking import held
+assert len(jax.devices("cpu")) == 2 and len(rod_arm.host_devices()) == 2
+rod = mjx_arm.load_rod("constrained")
+assert rod.placement() == "host" and rod.call_size() == 8
+programs = np.stack([held_program(seed, 0.4, (1, 2)) for seed in range(3)])
+split = rod.rollout(programs)
+grouped = held.rollout_grouped(rod, [(p, 1) for p in programs[:2]] + [(programs[2][:2], 1)], "rod")
+babbled = rod_babble.simulate_rod(rod, programs, chunk=2)
+rod_arm.host_devices = lambda: []
+assert rod.placement() == "cpu" and rod.call_size() is None
+one = rod.rollout(programs)
+assert split.shape == one.shape == (3, 4, 6)
+np.testing.assert_allclose(split, one, rtol=0, atol=1e-12)
+np.testing.assert_allclose(babbled, one, rtol=0, atol=1e-12)
+for a, b in zip(grouped, [one[0], one[1], rod.rollout(programs[2][:2])]):
+    np.testing.assert_allclose(a, b, rtol=0, atol=1e-12)
+assert np.abs(one[0] - one[1]).max() > 1e-4
+print("ok")
+"""
+    env = dict(os.environ, XLA_FLAGS="--xla_force_host_platform_device_count=2")
+    env["JAX_PLATFORMS"] = "cpu"
+    out = subprocess.run(
+        [sys.executable, "-c", code], env=env, capture_output=True, text=True, timeout=300
+    )
+    assert out.returncode == 0 and out.stdout.strip().endswith("ok"), out.stderr[-3000:]

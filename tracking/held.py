@@ -36,17 +36,8 @@ def run_dc(arm_c, commands_c: np.ndarray, k: int, backend: str) -> np.ndarray:
     return every_kth(arm_c.rollout(commands_c, backend=backend), k)
 
 
-#: Most trajectories in one padded rod call on an accelerator: one H200 runs the rod at ~1,090
-#: simulated s/s at batch 512 and ~400 at 64 (nearly the time of one trajectory up to ~64), so
-#: larger batches buy little and cost memory.
-ROD_CHUNK = 512
-
-
-def _on_accelerator() -> bool:
-    """Whether JAX's default device is not the CPU (the rod's padded batches pay off there)."""
-    import jax
-
-    return jax.default_backend() != "cpu"
+#: Chunk of `rollout_grouped(padded=True)` on an arm that names no call size of its own.
+PADDED_CHUNK = 512
 
 
 def hold_last(commands: list[np.ndarray]) -> np.ndarray:
@@ -89,14 +80,16 @@ def rollout_grouped(
     (another batch size would compile again).
 
     The reference rod (`mjx_arm.RodArm`, backend "rod") is latency-bound: on a GPU one call
-    costs about its longest trajectory's time whatever the batch up to ~64. So there (`padded`
-    None and JAX's default device not the CPU, or `padded` True) every job runs in as few calls
-    as it can: programs sorted by length, chunks of at most `ROD_CHUNK`, each program padded to
-    its chunk's longest by holding its last command (`hold_last`); the rod is causal, so each
-    job's poses are its own first T * k, every k-th kept. Each call is announced on stderr with
-    `progress`, as the bar moves only between calls. On a CPU (cost ~ total simulated seconds,
-    batching barely helps) the rod runs one group at a time like the chain, in batches of two
-    trajectories per core with `progress`.
+    costs about its longest trajectory's time whatever the batch up to ~64, and on the host's
+    devices (`mjx_arm.rod_arm.host_devices`) a call of a few trajectories per device costs about
+    its longest too. So there (`padded` None and `RodArm.call_size` not None, or `padded` True)
+    every job runs in as few calls as it can: programs sorted by length, chunks of at most
+    `call_size` (512 when padded is forced on an arm without one), each program padded to its
+    chunk's longest by holding its last command (`hold_last`); the rod is causal, so each job's
+    poses are its own first T * k, every k-th kept. Each call is announced on stderr with
+    `progress`, as the bar moves only between calls. On one CPU device (cost ~ total simulated
+    seconds) the rod runs one group at a time like the chain, in batches of two trajectories per
+    core with `progress`.
 
     Jobs with equal commands and k are simulated once and share the poses (copies): the
     simulator is deterministic and every trajectory runs on its own, so a deterministic method's
@@ -115,11 +108,13 @@ def rollout_grouped(
             out[i] = poses if n == 0 else poses.copy()
         return len(copies_of[first])
 
+    call_size = arm.call_size() if backend == "rod" else None
     if padded is None:
-        padded = backend == "rod" and _on_accelerator()
+        padded = call_size is not None
     with tqdm(total=len(jobs), desc=progress, unit="traj", disable=not progress) as bar:
         if padded:
-            _rollout_padded(arm, jobs, sorted(copies_of), backend, progress, keep, bar)
+            chunk = call_size or PADDED_CHUNK
+            _rollout_padded(arm, jobs, sorted(copies_of), backend, progress, keep, bar, chunk)
             return out
         for (_, k), same in groups.items():
             index = [copies[0] for copies in same.values()]
@@ -132,11 +127,11 @@ def rollout_grouped(
     return out
 
 
-def _rollout_padded(arm, jobs, index: list[int], backend, progress, keep, bar) -> None:
+def _rollout_padded(arm, jobs, index: list[int], backend, progress, keep, bar, chunk) -> None:
     """`rollout_grouped`'s padded calls: jobs `index` (one per distinct job) longest first, in
-    chunks of at most `ROD_CHUNK` of equal size, each padded to its longest (`hold_last`)."""
+    chunks of at most `chunk` of equal size, each padded to its longest (`hold_last`)."""
     index = sorted(index, key=lambda i: -len(jobs[i][0]))
-    n_calls = -(-len(index) // ROD_CHUNK)
+    n_calls = -(-len(index) // chunk)
     size = -(-len(index) // max(n_calls, 1))
     period_s = 1.0 / CONTROL_HZ
     for start in range(0, len(index), max(size, 1)):

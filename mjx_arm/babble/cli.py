@@ -144,7 +144,8 @@ def _add_run_options(p: argparse.ArgumentParser) -> None:
         type=_int_at_least(1),
         default=PAPER.chunk,
         help=f"trajectories per device call (MuJoCo C: at most {C_MAX_CHUNK}; rod: at most"
-        f" {ROD_GPU_MAX_BATCH} on a GPU, two per core on a CPU)",
+        f" {ROD_GPU_MAX_BATCH} on a GPU, two per core on a CPU, four per device on the host's"
+        " devices: mjx_arm.rod_arm.host_devices)",
     )
     p.add_argument(
         "--model",

@@ -18,7 +18,9 @@ costs about the total simulated time, and it goes in chunks of `cpu_chunk()` tra
 move the progress bar every few seconds. The paper's preset (2 domains x 53 x 60 s) is ~6,400
 simulated s: ~4 min on 2 CPU cores, four calls of ~10 s on one H200; the long D_c set
 (``--domain constrained --n 400 --duration 120``) ~48,000 simulated s: ~25 min on 2 cores, one
-call of ~1 min on one H200 (~1,000 simulated s/s at batch 400).
+call of ~1 min on one H200 (~1,000 simulated s/s at batch 400). When JAX has several host CPU
+devices (`mjx_arm.rod_arm.host_devices`), the rod runs there instead, `RodArm.call_size`
+trajectories a call split over them.
 """
 
 from __future__ import annotations
@@ -30,10 +32,10 @@ import jax
 import numpy as np
 
 from mjx_arm.machine import usable_cores
+from mjx_arm.rod_arm import ACCELERATOR_BATCH
 
-#: Largest rod batch per call on an accelerator: the H200's throughput still grows to 512
-#: (bench/results/h200: ~1,090 simulated s/s), and 512 x 1,200 periods of float64 poses are ~30 MB.
-GPU_MAX_BATCH = 512
+#: Largest rod batch per call on an accelerator (`mjx_arm.rod_arm.ACCELERATOR_BATCH`).
+GPU_MAX_BATCH = ACCELERATOR_BATCH
 #: The rod's floating-point type for babbling: the reference (float32 drifts from it).
 DTYPE = "float64"
 
@@ -44,7 +46,9 @@ def cpu_chunk() -> int:
     return max(1, 2 * usable_cores())
 
 
-def batch_sizes(n: int, chunk: int, on_accelerator: bool | None = None) -> list[int]:
+def batch_sizes(
+    n: int, chunk: int, on_accelerator: bool | None = None, host_call: int | None = None
+) -> list[int]:
     """The sizes of the calls that simulate n trajectories (sum n).
 
     Args:
@@ -53,11 +57,17 @@ def batch_sizes(n: int, chunk: int, on_accelerator: bool | None = None) -> list[
       on_accelerator: a GPU or TPU (default: JAX's default backend is not the CPU): calls of at
         most min(chunk, `GPU_MAX_BATCH`), as few as possible and as even as possible (the caller
         pads them to one size); on a CPU, calls of min(chunk, `cpu_chunk()`), the last shorter.
+      host_call: the rod runs on the host's devices (`mjx_arm.rod_arm.host_devices`) with this
+        `RodArm.call_size`: calls of min(chunk, host_call), the last shorter (a compile there
+        costs ~1 s, less than padding a call); it overrides `on_accelerator`.
     """
-    if on_accelerator is None:
-        on_accelerator = jax.default_backend() != "cpu"
     if n <= 0:
         return []
+    if host_call is not None:
+        size = max(1, min(chunk, host_call))
+        return [size] * (n // size) + ([n % size] if n % size else [])
+    if on_accelerator is None:
+        on_accelerator = jax.default_backend() != "cpu"
     if on_accelerator:
         limit = max(1, min(chunk, GPU_MAX_BATCH))
         calls = math.ceil(n / limit)
@@ -78,7 +88,9 @@ def simulate_rod(
     """Poses of babbling programs in the rod, in the calls `batch_sizes` gives.
 
     On an accelerator every call is padded to the first call's size by repeating the last
-    program (one compile per split); the padded rows are simulated and dropped.
+    program (one compile per split); the padded rows are simulated and dropped. When the rod
+    runs on the host's devices (`RodArm.placement() == "host"`, and `on_accelerator` not given)
+    the calls are `RodArm.call_size` trajectories, unpadded.
 
     Args:
       rod: a `mjx_arm.RodArm` in its domain.
@@ -93,9 +105,11 @@ def simulate_rod(
     Raises:
       SimulationDivergedError: a trajectory diverged (`RodArm.rollout`).
     """
+    host_call = None
     if on_accelerator is None:
-        on_accelerator = jax.default_backend() != "cpu"
-    sizes = batch_sizes(programs_bar.shape[0], chunk, on_accelerator)
+        host_call = rod.call_size() if rod.placement() == "host" else None
+        on_accelerator = host_call is None and jax.default_backend() != "cpu"
+    sizes = batch_sizes(programs_bar.shape[0], chunk, on_accelerator, host_call)
     poses = np.zeros(programs_bar.shape[:2] + (6,), np.float64)
     start = 0
     for size in sizes:

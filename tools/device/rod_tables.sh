@@ -7,9 +7,9 @@
 # rod's trainings done by tools/device/chain.sh in this warm machine ($TMP/paper, STAGES="rod_data
 # rod_data_long rod_tracker rod_forward rod_ccgan rod_wcgan"; rod_tracker's cache is read when
 # there); rod_table_aged needs nothing but the tree, so
-# it can run beside them. The tables named in WHICH run at once, in one call (rod processes time-slice
-# one GPU, bench/results/h200/rod_sharing: together they take about as long as one after the
-# other), each into $TMP/rod_tables/<table>/, returned as
+# it can run beside them. The tables named in WHICH run at once, in one call, their rod rollouts
+# split over the host's cores (one JAX CPU device per core, as experiments.paper's stages get on
+# a GPU machine), each into $TMP/rod_tables/<table>/, returned as
 # $OUT/rod_tables_<table>.tar.gz (the device returns at most 8 files).
 #
 #   WHICH=rod_table_aged bash tools/device/rod_tables.sh &   # beside chain.sh in one call
@@ -22,6 +22,8 @@ WHICH=${WHICH:-rod_table rod_table_aged}
 TABLES=$TMP/rod_tables
 mkdir -p "$TABLES"
 export XLA_PYTHON_CLIENT_PREALLOCATE=false
+# The rod on the host's cores, as experiments.paper gives its stages (mjx_arm.rod_arm.host_devices).
+export XLA_FLAGS="${XLA_FLAGS:-} --xla_force_host_platform_device_count=$(nproc)"
 common=(--simulator rod --model models/softarm.xml --no-robustness)
 pids=()
 for table in $WHICH; do
