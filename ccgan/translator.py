@@ -64,6 +64,13 @@ METHODS = ("ccgan", "wcgan", "finetune", "distill", "distill_from_wcgan", "disti
 LABELS = ("method", "source_domain", "target_domain", "model_hash")
 #: The flag of every command that loads translators which lets files without LABELS through.
 TRUST_FLAG = "--trust-unlabelled-translators"
+#: The key, in a distilled file's stage record (its metadata's "finetune"), of the arm it was
+#: taught on when that was not its target domain itself but a Domain read from a file
+#: (`ccgan.distill --teach-domain`, e.g. one identified from the target's data): {"path",
+#: "sha256" (of the file), "method" (the identification's), "domain" (every Domain field),
+#: "values" (`mjx_arm.domains.physical_values` of the taught arm)}. A file without it was
+#: taught in its target itself (privileged), or not distilled; `taught_domain` reads it.
+TAUGHT_DOMAIN = "taught_domain"
 
 
 class TranslatorMismatchError(checkpoint.CheckpointError):
@@ -85,6 +92,15 @@ def translator_labels(meta: dict) -> dict:
     if stage_hash:
         labels["model_hash"] = stage_hash
     return labels
+
+
+def taught_domain(meta: dict) -> dict | None:
+    """The record of the arm a translator file was last distilled on when that was a Domain
+    read from a file (`TAUGHT_DOMAIN`: a translator built from the target's data alone); None
+    when its last stage was taught in the target itself, or it was never distilled. Only the
+    last stage counts: a file distilled again in the target is privileged again."""
+    record = (meta.get("finetune") or {}).get(TAUGHT_DOMAIN)
+    return record if isinstance(record, dict) else None
 
 
 def is_rod_trained(labels: dict) -> bool:

@@ -7,8 +7,12 @@ passes validation can be put in any domain.
 from __future__ import annotations
 
 import dataclasses
+import hashlib
+import json
 import math
 import numbers
+import os
+from pathlib import Path
 
 import mujoco
 import numpy as np
@@ -206,3 +210,115 @@ def apply(
         m.opt.gravity[:] /= scale
         # Actuator and spring forces are unchanged, so statics are unchanged; gravity compensates.
     return float(scale)
+
+
+#: The name of every Domain read from a file (`read_domain_file`): a teaching arm fitted to a
+#: target's data, never a built-in medium.
+IDENTIFIED = "identified"
+
+
+@dataclasses.dataclass(frozen=True)
+class DomainFile:
+    """A Domain read from a JSON file (`read_domain_file`), with what its callers record.
+
+    Attributes:
+      domain: the Domain, named `IDENTIFIED`.
+      path: the file, as given.
+      sha256: hex digest of the file's bytes: which identification a run was taught on.
+      method: the identification method whose fit it is (an identify.json), or None (a plain
+        ``{"domain": {...}}`` file).
+    """
+
+    domain: Domain
+    path: str
+    sha256: str
+    method: str | None
+
+    def record(self) -> dict:
+        """A JSON-ready record: {"path", "sha256", "method", "domain": every Domain field}."""
+        return {
+            "path": self.path,
+            "sha256": self.sha256,
+            "method": self.method,
+            "domain": dataclasses.asdict(self.domain),
+        }
+
+
+def read_domain_file(path: str | os.PathLike) -> DomainFile:
+    """Reads a Domain from a JSON file: `python -m mjx_arm.identify`'s identify.json (the fitted
+    domain of its one method; of several, the one with the lowest held-out tip RMS, the
+    identification's own score on the target's held-out programs), or a plain
+    ``{"domain": {<Domain fields>}}`` (fields left out keep their defaults; null where a field
+    allows None). The Domain is renamed `IDENTIFIED` whatever the file calls it, so that a
+    teaching arm is never taken for a built-in medium.
+
+    Raises:
+      FileNotFoundError: no file at `path`.
+      ValueError: one line naming the file and the problem: not JSON, neither layout, an
+        identify.json without results, an unknown Domain field, or a value `Domain` refuses
+        (not a real number, not finite and > 0).
+    """
+    raw_path = Path(path)
+    if not raw_path.is_file():
+        raise FileNotFoundError(f"domain file {path}: no such file")
+    data = raw_path.read_bytes()
+    try:
+        content = json.loads(data)
+    except (UnicodeDecodeError, json.JSONDecodeError) as err:
+        raise ValueError(f"domain file {path} is not JSON ({err})") from None
+    if not isinstance(content, dict):
+        kind = type(content).__name__
+        raise ValueError(f"domain file {path}: expected a JSON object, got {kind}")
+    method = None
+    if "results" in content:  # identify.json
+        results = content["results"]
+        if not isinstance(results, dict) or not results:
+            raise ValueError(f"domain file {path}: an identify.json without results")
+        bad = [m for m, r in results.items() if not isinstance(r, dict) or "domain" not in r]
+        if bad:
+            raise ValueError(f"domain file {path}: results {bad} hold no fitted domain")
+        method = next(iter(results))
+        if len(results) > 1:
+            method = min(results, key=lambda m: _held_out_rms(results[m], path, m))
+        fields = results[method]["domain"]
+    elif "domain" in content:
+        fields = content["domain"]
+    else:
+        raise ValueError(
+            f'domain file {path}: neither an identify.json (results) nor {{"domain": {{...}}}}'
+        )
+    if not isinstance(fields, dict):
+        raise ValueError(f"domain file {path}: its domain is not a JSON object")
+    known = {f.name for f in dataclasses.fields(Domain)}
+    unknown = sorted(set(fields) - known)
+    if unknown:
+        raise ValueError(
+            f"domain file {path}: unknown Domain fields {unknown}; known: {sorted(known)}"
+        )
+    try:
+        domain = Domain(**(fields | {"name": IDENTIFIED}))
+    except (TypeError, ValueError) as err:
+        raise ValueError(f"domain file {path}: {err}") from None
+    digest = hashlib.sha256(data).hexdigest()
+    return DomainFile(domain=domain, path=str(path), sha256=digest, method=method)
+
+
+def _held_out_rms(result: dict, path, method: str) -> float:
+    """An identify.json result's held-out tip RMS (cm), which ranks several methods' fits."""
+    value = result.get("val_rms_cm")
+    if isinstance(value, bool) or not isinstance(value, numbers.Real) or not math.isfinite(value):
+        raise ValueError(f"domain file {path}: result {method!r} has no held-out tip RMS")
+    return float(value)
+
+
+def physical_values(mj_model: mujoco.MjModel, source_mj_model: mujoco.MjModel, domain: Domain):
+    """What a domain changes physically, comparable across ways of writing it: {"viscosity_scale":
+    the medium's viscosity over the source medium's (`source_mj_model`: the same MJCF in
+    "source"), "stiffness_scale", "mass_scale"}, for `mj_model` loaded in `domain`. A Domain
+    with viscosity_scale None (the model's own constrained medium) and one with the fitted
+    number give the same values, so an identified arm can be set beside the truth."""
+    return {
+        "viscosity_scale": float(mj_model.opt.viscosity / source_mj_model.opt.viscosity),
+        "stiffness_scale": domain.stiffness_scale,
+        "mass_scale": domain.mass_scale,
+    }

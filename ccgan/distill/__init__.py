@@ -4,6 +4,7 @@ The stage's jobs, one module each:
 - `config`: `DistillConfig`, its settings;
 - `teacher`: the programs, the teacher's commands for them and their cache (`teacher.npz`,
   keyed by everything that made it);
+- `hold`: the hold factor k: set, the translators' own, or chosen in the teaching arm;
 - `imitation`: the training data, the Adam step, the held-out score and a stopped run's
   training state;
 - `cli`: the command line's parser and its checks (`python -m ccgan.distill`, whose help is
@@ -32,11 +33,14 @@ from ccgan.distill.cli import (
     build_parser,
     check_teacher_from,
     plan_teacher_only,
+    read_teach_domain,
     record_lineage,
     summary,
+    teach_on,
     writer,
 )
 from ccgan.distill.config import ConfigError, DistillConfig
+from ccgan.distill.hold import choose_hold_factor
 from ccgan.distill.imitation import (
     ImitationData,
     _best_of_seeds,
@@ -70,6 +74,7 @@ __all__ = [
     "ImitationData",
     "adopt_teacher",
     "build_parser",
+    "choose_hold_factor",
     "distill",
     "head_weights",
     "held_out_programs",
@@ -99,13 +104,16 @@ def distill(
     on_validation=None,
     stop: threading.Event | None = None,
     resume: Path | None = None,
+    hold: tuple[int, dict | None] | None = None,
 ) -> tuple[list[dict], dict]:
     """Trains each translator's G_c to reproduce the teacher's commands.
 
     Args:
       translators: trained translators (the same generator shape; the same k unless
-        `config.hold_factor` sets one), one per seed.
-      arm_s, arm_c: the D_s and D_c arms.
+        `config.hold_factor` sets one or `config.k_candidates` chooses one), one per seed.
+      arm_s, arm_c: the D_s arm and the D_c arm the teacher plans in and the iterates are scored
+        in: the target itself, or an arm identified from its data (`ccgan.distill
+        --teach-domain`).
       config: settings.
       cache: file for the teacher's commands (read when its key matches, `teacher_cache_key`;
         else planned and written, a cache of another key first moved aside).
@@ -119,15 +127,18 @@ def distill(
         translators, so that a stopped run goes on from its next epoch instead of from the
         start (a distillation of 240 epochs takes 200-250 s of one H100, longer than what a
         deadline leaves of a 10-minute call); removed when training ends otherwise.
+      hold: (k, how it was chosen) from `choose_hold_factor`, when the caller has it already
+        (the command line chooses once for its teacher and its training); None: chosen here.
 
     Returns:
       (best G_c parameters per translator, history: "train_loss" [epochs, S] (weighted mean
       squared normalised pressure error), "val" {epoch: {"score", "window", "whole"} [S] cm},
       "teacher_val_x_err_cm" and "stretch_val_x_err_cm" (whole, window), "best_epoch" [S]
       (0: the original was best),
-      "best_val_x_err_cm" [S], "val_x_err_cm_before" [S] (at this k), "k", "wall_s").
+      "best_val_x_err_cm" [S], "val_x_err_cm_before" [S] (at this k), "k", "wall_s", and
+      "k_choice" where k was chosen (`choose_hold_factor`'s record)).
     """
-    k = config.hold_factor or common_k(translators)
+    k, k_choice = hold or choose_hold_factor(config, translators, arm_s, arm_c, log)
     n_train = config.n_train_programs  # >= batch_size (DistillConfig checks)
     t0 = time.perf_counter()
     translators = with_generator_unroll(translators, config.generator_unroll)
@@ -151,6 +162,8 @@ def distill(
     if saved is None:
         first = 1
         history = _new_history(score_arm, k, data)
+        if k_choice is not None:
+            history["k_choice"] = k_choice
         best = BestIterates.start(stacked, validate_epoch(0, stacked))
         rng = np.random.default_rng(config.seed)
     else:
@@ -211,18 +224,23 @@ def main(argv=None) -> None:
     if not a.translators and not a.teacher_only:
         p.error("--translators is required (only --teacher-only plans without translators)")
     config = config_from_args(p, a, DistillConfig)
-    if not a.translators and config.hold_factor == 0:
-        p.error("--teacher-only without --translators needs --hold-factor (k)")
+    if not a.translators and config.hold_factor == 0 and not config.k_candidates:
+        p.error("--teacher-only without --translators needs --hold-factor (k) or --k-candidates")
     check_teacher_from(p, a)
+    taught = read_teach_domain(p, a)
     stage = start_stage(p, a, "ccgan.distill", dataclasses.asdict(config), argv)
     record_lineage(p, a, stage)
-    if config.hold_factor == 0:
+    if taught is not None:
+        stage = teach_on(p, a, stage, taught)
+    if config.hold_factor == 0 and not config.k_candidates:
         try:
             common_k(stage.translators)
         except ValueError as err:
-            p.error(f"{err}: give --hold-factor")
+            p.error(f"{err}: give --hold-factor or --k-candidates")
+    # Chosen once, in the arm the teacher plans in: the teacher's key and the training need it.
+    hold = choose_hold_factor(config, stage.translators, stage.arm_s, stage.arm_c)
     if a.teacher_from:
-        adopt_teacher_from(p, a, config, stage)
+        adopt_teacher_from(p, a, config, stage, hold[0])
 
     # SIGTERM (a time limit, experiments.stages at its deadline) stops the teacher after its
     # chunk of source steps (its progress kept) or training after its epoch (its best iterates
@@ -230,7 +248,7 @@ def main(argv=None) -> None:
     stop = threading.Event()
     previous = signal.signal(signal.SIGTERM, lambda *_: stop.set())
     try:
-        _run(a, config, stage, stop)
+        _run(a, config, stage, stop, hold)
     except mpc_mjx.TrackingStopped as err:
         print(f"teacher: {err}: rerun the same command to go on", file=sys.stderr)
         sys.exit(128 + signal.SIGTERM)
@@ -241,10 +259,13 @@ def main(argv=None) -> None:
         sys.exit(128 + signal.SIGTERM)
 
 
-def _run(a: argparse.Namespace, config: DistillConfig, stage, stop: threading.Event) -> None:
-    """`main`'s work: the teacher only, or the whole distillation."""
+def _run(
+    a: argparse.Namespace, config: DistillConfig, stage, stop: threading.Event, hold: tuple
+) -> None:
+    """`main`'s work: the teacher only, or the whole distillation, at `hold`'s k
+    (`choose_hold_factor`)."""
     if a.teacher_only:
-        plan_teacher_only(config, stage, stop)
+        plan_teacher_only(config, stage, stop, hold[0])
         return
     write = writer(stage)
     params, history = distill(
@@ -256,6 +277,7 @@ def _run(a: argparse.Namespace, config: DistillConfig, stage, stop: threading.Ev
         on_validation=write,
         stop=stop,
         resume=stage.out / "training_state.npz",
+        hold=hold,
     )
     write(params, history)
     print(summary(stage.out, history))

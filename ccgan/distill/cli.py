@@ -33,17 +33,29 @@ is "distill" when the start translators are CCGAN-GP's and "distill_from_<method
 The CLI simulates the arm of `--model` (default the I-Support arm,
 `mjx_arm.constants.TRANSLATOR_MODEL_PATH`, models/softarm.xml, the one the committed
 translators were trained on).
+
+Taught on an identified arm (`--teach-domain FILE`: an identify.json of `python -m
+mjx_arm.identify`, or ``{"domain": {...}}``), the teacher plans, the iterates are scored and k
+is chosen (`--k-candidates`) in that arm, `mjx_arm.load(--model, domain=<the file's Domain>)`,
+never in the true target; the files are still labelled for `--domain`, the target they are
+meant for, and record what they were taught on ("taught_domain" in their "finetune" record:
+the file, its sha256, the Domain and its physical values), so that `eval.shapes` scores them as
+the data-only translator (`ccgan_ident`), not the privileged one (`ccgan_sim`):
+
+    python -m ccgan.distill --translators ... --domain constrained \\
+        --teach-domain out/identify/identify.json --k-candidates 10 15 20 --out runs/ident
 """
 
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import time
 from pathlib import Path
 
 import numpy as np
 
-import mjx_arm  # noqa: F401  (before jax: sets the XLA CPU flag)
+import mjx_arm  # (before jax: sets the XLA CPU flag)
 from ccgan import checkpoint
 from ccgan.cli import add_config_flags
 from ccgan.distill.config import DistillConfig
@@ -55,6 +67,8 @@ from ccgan.distill.teacher import (
     teacher_data,
 )
 from ccgan.stage import Stage, common_k, stage_parser
+from ccgan.translator import TAUGHT_DOMAIN
+from mjx_arm import domains
 
 #: The method of a distilled file whose start translators are CCGAN-GP's; other starts give
 #: f"{DISTILLED}_from_<their method>" (`ccgan.translator.METHODS` lists them).
@@ -78,6 +92,14 @@ def build_parser() -> argparse.ArgumentParser:
         help="start from the teacher cache FILE (the teacher.npz of a --teacher-only run with"
         " the same settings, k, arm and domain), copied into --out unless --out has its own; one"
         " planned otherwise, or truncated, is refused before any work",
+    )
+    p.add_argument(
+        "--teach-domain",
+        metavar="FILE",
+        help="teach in the arm of this Domain file (an identify.json of python -m"
+        ' mjx_arm.identify, or {"domain": {...}}): the teacher plans, the iterates are scored'
+        " and --k-candidates chooses k there, not in --domain; the files are labelled for"
+        " --domain and record the file (default: taught in --domain itself)",
     )
     return p
 
@@ -130,10 +152,41 @@ def check_teacher_from(p: argparse.ArgumentParser, a: argparse.Namespace) -> Non
             p.error(f"--teacher-from: {err}")
 
 
-def adopt_teacher_from(p: argparse.ArgumentParser, a, config: DistillConfig, stage: Stage):
-    """Copies --teacher-from into --out (`adopt_teacher`); one planned under another key is a
-    usage error naming the differing fields."""
-    k = config.hold_factor or common_k(stage.translators)
+def read_teach_domain(p: argparse.ArgumentParser, a) -> domains.DomainFile | None:
+    """--teach-domain's Domain (`mjx_arm.domains.read_domain_file`), None without the flag; a
+    missing or unreadable file is a usage error (one line), before any arm is loaded."""
+    if not a.teach_domain:
+        return None
+    try:
+        return domains.read_domain_file(a.teach_domain)
+    except (OSError, ValueError) as err:
+        p.error(f"--teach-domain: {err}")
+
+
+def teach_on(p: argparse.ArgumentParser, a, stage: Stage, taught: domains.DomainFile) -> Stage:
+    """The stage with its D_c arm replaced by the arm of `taught` (the same --model), in which
+    the teacher plans and the iterates are scored; its labels stay --domain's (the target the
+    files are meant for). The run record (each file's "finetune", distill.json) gains
+    "taught_domain": `taught.record()` and "values", the taught arm's physical values
+    (`mjx_arm.domains.physical_values`), which `eval.shapes` sets beside the true target's. The
+    true target (`stage.arm_c` until here) teaches nothing. An arm that cannot be loaded in the
+    file's Domain is a usage error."""
+    try:
+        arm = mjx_arm.load(a.model, domain=taught.domain)
+    except (FileNotFoundError, ValueError, RuntimeError) as err:
+        p.error(f"--teach-domain {a.teach_domain}: --model {a.model} in its Domain: {err}")
+    values = domains.physical_values(arm.mj_model, stage.arm_s.mj_model, arm.domain)
+    stage.run[TAUGHT_DOMAIN] = taught.record() | {"values": values}
+    return dataclasses.replace(stage, arm_c=arm)
+
+
+def adopt_teacher_from(
+    p: argparse.ArgumentParser, a, config: DistillConfig, stage: Stage, k: int | None = None
+):
+    """Copies --teacher-from into --out (`adopt_teacher`) for k (None: the set or the
+    translators' own); one planned under another key is a usage error naming the differing
+    fields."""
+    k = k or config.hold_factor or common_k(stage.translators)
     key = teacher_cache_key(config, k, stage.arm_c)
     try:
         if adopt_teacher(Path(a.teacher_from), stage.out / "teacher.npz", key):
@@ -142,9 +195,10 @@ def adopt_teacher_from(p: argparse.ArgumentParser, a, config: DistillConfig, sta
         p.error(f"--teacher-from: {err}")
 
 
-def plan_teacher_only(config: DistillConfig, stage: Stage, stop) -> None:
-    """--teacher-only: plans the teacher's commands into --out/teacher.npz and says so."""
-    k = config.hold_factor or common_k(stage.translators)
+def plan_teacher_only(config: DistillConfig, stage: Stage, stop, k: int | None = None) -> None:
+    """--teacher-only: plans the teacher's commands into --out/teacher.npz at k (None: the set
+    or the translators' own) and says so."""
+    k = k or config.hold_factor or common_k(stage.translators)
     should_stop = _stop_check(config, time.perf_counter(), stop)
     data = teacher_data(
         config, stage.arm_s, stage.arm_c, k, stage.out / "teacher.npz", progress=True,
@@ -170,6 +224,7 @@ def writer(stage: Stage):
                 "val_x_err_cm_best": history["best_val_x_err_cm"][s_i],
                 "started_from": stage.sources[s_i][1].get("started_from"),
             }
+            | ({"k_choice": history["k_choice"]} if "k_choice" in history else {})
             for s_i in range(len(stage.seeds))
         ]
         stage.write(params, per_seed, history, "distill.json", k=history["k"])

@@ -6,7 +6,7 @@ import dataclasses
 
 import mjx_arm  # noqa: F401  (before jax: sets the XLA CPU flag)
 from mjx_arm import arm as mjx_arm_arm
-from tracking.config import ConfigError, check_fields
+from tracking.config import ConfigError, check_fields, check_ints
 
 __all__ = ["ConfigError", "DistillConfig"]
 
@@ -85,6 +85,14 @@ class DistillConfig:
     translators (0: the translators' own, which must agree). G_c gives one command per source
     step whatever k is; a k at which the D_c arm keeps up with the targets keeps the teacher
     off the valve limits (`studies.mpc_saturation`)."""
+    k_candidates: tuple[int, ...] = ()
+    """Hold factors k to choose k among, in the arm the teacher plans in (with --teach-domain,
+    the identified arm): stretch only's best on `mjx_arm.programs.validation_program` (never a
+    test shape), as `eval.shapes` picks stretch only's k (empty: hold_factor, or the
+    translators' own). The chosen k and the X_err by k go into distill.json."""
+    k_choice_seconds: float = 20.0
+    """Length of the validation program that chooses k among k_candidates (s; eval.shapes's is
+    20 s)."""
 
     def __post_init__(self):
         """Refuses settings that would fail late, after the teacher's commands are computed and
@@ -114,6 +122,7 @@ class DistillConfig:
                 "score_substeps": 0,
                 "generator_unroll": 1,
                 "final_lr_factor": 0,
+                "k_choice_seconds": period,
             },
             above={"head_weight": 0, "learning_rate": 0},
         )
@@ -131,6 +140,13 @@ class DistillConfig:
                 f"must be <= n_train + n_train_full + n_train_babble = {self.n_train_programs}"
                 f" training programs, got {self.batch_size}",
             )
+        if self.k_candidates:
+            check_ints("k_candidates", self.k_candidates, 1)
+            if self.hold_factor:
+                raise ConfigError(
+                    "k_candidates",
+                    f"choose k or set it (hold_factor {self.hold_factor}), not both",
+                )
         if self.n_val + self.n_val_full + self.n_val_babble < 1:
             raise ConfigError(
                 "n_val", "plus n_val_full and n_val_babble must be >= 1 (held-out programs)"

@@ -210,6 +210,9 @@ def _resume_key(config: DistillConfig, k: int, start_params) -> str:
     settings = dataclasses.asdict(config) | {"max_wall_s": None, "k": k}
     if not config.score_substeps:  # states saved before the field existed stay valid
         settings.pop("score_substeps")
+    if not config.k_candidates:  # the same: k set or the translators' own
+        settings.pop("k_candidates")
+        settings.pop("k_choice_seconds")
     h.update(json.dumps(settings, sort_keys=True).encode())
     for leaf in jax.tree.leaves(start_params):
         h.update(np.ascontiguousarray(np.asarray(leaf)).tobytes())
