@@ -18,6 +18,15 @@ Methods:
            stays ccgan_sim: the committed runs' shapes.json and stage folders use it.
   wcgan    the WCGAN-GP baseline translator: a translator checkpoint given by --wcgan-path or
            found at results/paper/rerun_2026-11-27/run/wcgan/translator.ckpt.
+  ccgan_ident  "distilled (identified arm)": a CCGAN-GP translator distilled on an arm identified
+           from the target's babbling data (`ccgan.distill --teach-domain`, k chosen there;
+           docs/identification.md), its file labelled "distill" for --target-domain and
+           recording the Domain file it was taught on ("taught_domain"): --identified-path, or
+           results/paper/rerun_2026-11-27/run/ident_sim/translator.ckpt where a chain made one.
+           Scored, like every method, in the true target; its k is the one it holds. The
+           data-only counterpart of ccgan_sim, which was taught in the true target (privileged):
+           a file taught on a Domain file is refused as ccgan_sim, one taught in the target is
+           refused as ccgan_ident.
   mpc      receding-horizon tracking in the D_c simulator itself (`tracking.mpc.track`, MuJoCo C,
            k = the stretch k): at every source step the next command is planned by Gauss-Newton
            on the simulated tracking error and applied. Not a translator (it needs the D_c
@@ -57,10 +66,10 @@ import numpy as np
 from ccgan.translator import TRANSLATORS_DIR
 from tracking.held import stretch
 
-METHODS = ("none", "stretch", "ccgan", "ccgan_sim", "wcgan", "mpc", "oracle")
+METHODS = ("none", "stretch", "ccgan", "ccgan_sim", "wcgan", "mpc", "oracle", "ccgan_ident")
 #: What runs without --methods (the oracle is left out on CPU).
 DEFAULT_METHODS = ("none", "stretch", "ccgan", "ccgan_sim", "wcgan", "oracle")
-TRANSLATOR_METHODS = ("ccgan", "ccgan_sim", "wcgan")
+TRANSLATOR_METHODS = ("ccgan", "ccgan_sim", "wcgan", "ccgan_ident")
 #: Each method's one name, in tables, plots, videos, notes and help.
 METHOD_NAMES = {
     "none": "untranslated",
@@ -70,6 +79,7 @@ METHOD_NAMES = {
     "wcgan": "WCGAN-GP",
     "mpc": "tracker",
     "oracle": "oracle",
+    "ccgan_ident": "distilled (identified arm)",
 }
 #: Other names a command line accepts for a method (--methods, --robust-methods).
 METHOD_ALIASES = {"distilled": "ccgan_sim"}
@@ -77,13 +87,30 @@ METHOD_ALIASES = {"distilled": "ccgan_sim"}
 CCGAN_SIM_DEFAULT_PATH = TRANSLATORS_DIR / "ccgan_sim" / "translator.ckpt"
 #: Where the WCGAN-GP baseline's translator checkpoint is looked for when no path is given.
 WCGAN_DEFAULT_PATH = TRANSLATORS_DIR / "wcgan" / "translator.ckpt"
+#: Where the translator distilled on the identified arm is looked for when no path is given
+#: (the chain's ident_sim stage; absent until a run with it is committed).
+IDENT_DEFAULT_PATH = TRANSLATORS_DIR / "ident_sim" / "translator.ckpt"
 #: The flag that gives each translator method's checkpoint, named in notes and errors.
-PATH_FLAGS = {"ccgan": "--ccgan-path", "wcgan": "--wcgan-path", "ccgan_sim": "--distilled-path"}
+PATH_FLAGS = {
+    "ccgan": "--ccgan-path",
+    "wcgan": "--wcgan-path",
+    "ccgan_sim": "--distilled-path",
+    "ccgan_ident": "--identified-path",
+}
 #: The "method" a translator file must record (`ccgan.translator.LABELS`) to be scored as each
 #: translator method: a WCGAN-GP file is never reported as CCGAN-GP, a trained one never as
 #: distilled, and a translator distilled from another start (`ccgan.distill` labels it
 #: "distill_from_<start method>", e.g. "distill_from_wcgan") never as the distilled CCGAN-GP.
-FILE_METHODS = {"ccgan": ("ccgan",), "wcgan": ("wcgan",), "ccgan_sim": ("distill",)}
+FILE_METHODS = {
+    "ccgan": ("ccgan",),
+    "wcgan": ("wcgan",),
+    "ccgan_sim": ("distill",),
+    "ccgan_ident": ("distill",),
+}
+#: The distilled methods, by what taught them: ccgan_ident's files must record the Domain file
+#: they were taught on (`ccgan.translator.taught_domain`), ccgan_sim's must not (taught in the
+#: target itself), so that neither is reported as the other.
+TAUGHT_ON_FILE = {"ccgan_sim": False, "ccgan_ident": True}
 #: Methods whose translator files are no longer scored: the label -> why.
 RETIRED_FILE_METHODS = {
     "finetune": "ccgan.finetune, a method retired for the distillation (its numbers are kept"
@@ -112,6 +139,7 @@ def translator_source(method: str, cfg) -> tuple[Path, bool]:
     given, default = {
         "ccgan_sim": (cfg.ccgan_sim_path, CCGAN_SIM_DEFAULT_PATH),
         "wcgan": (cfg.wcgan_path, WCGAN_DEFAULT_PATH),
+        "ccgan_ident": (cfg.ccgan_ident_path, IDENT_DEFAULT_PATH),
     }[method]
     return Path(given or default), given is not None
 
@@ -124,7 +152,8 @@ class TranslatorMethod:
     `Arm.model_hash`es its files record as the arm they were trained on (files written before
     that was recorded add none); `files` the checkpoint files loaded, the main one first, and
     `labels` what each records of itself (`ccgan.translator.translator_labels`, with
-    "started_from" where a distillation recorded its start), for the report.
+    "started_from" where a distillation recorded its start and "taught_domain" where it was
+    taught on a Domain file), for the report.
     """
 
     def __init__(
@@ -175,7 +204,8 @@ def load_translator(method: str, cfg) -> tuple[TranslatorMethod | None, str]:
     not load, raises, so a run never reports a table without the method it was asked to score.
     Every file must be labelled (`ccgan.translator.check_labels`) as made by the method
     (`FILE_METHODS`; a retired method's file is refused as such, `RETIRED_FILE_METHODS`) from
-    "source" into cfg.target_domain; a file without labels (the solid-disc
+    "source" into cfg.target_domain, and a distilled one as taught on a Domain file or in the
+    target as its method requires (`TAUGHT_ON_FILE`); a file without labels (the solid-disc
     arm's) loads only with cfg.trust_unlabelled_translators. The arms the files record go into
     `TranslatorMethod.model_hashes`, for `check_translator_arms`.
 
@@ -188,7 +218,8 @@ def load_translator(method: str, cfg) -> tuple[TranslatorMethod | None, str]:
 
     Raises:
       TranslatorError: an asked-for checkpoint is absent, a checkpoint does not load, or it is
-        labelled for another method or domain, or not labelled and not trusted.
+        labelled for another method or domain, taught otherwise than its method says, or not
+        labelled and not trusted.
     """
     path, asked = translator_source(method, cfg)
     flag = PATH_FLAGS[method] + (" or $CCGAN_TRANSLATOR" if method == "ccgan" else "")
@@ -201,6 +232,7 @@ def load_translator(method: str, cfg) -> tuple[TranslatorMethod | None, str]:
         TranslatorMismatchError,
         UnlabelledTranslatorError,
         check_labels,
+        taught_domain,
         translator_from_checkpoint,
     )
 
@@ -225,6 +257,8 @@ def load_translator(method: str, cfg) -> tuple[TranslatorMethod | None, str]:
                 target_domain=cfg.target_domain,
                 trust_unlabelled=cfg.trust_unlabelled_translators,
             )
+            taught = taught_domain(source[1])
+            _check_taught(method, file, taught)
         except TranslatorMismatchError as err:
             raise TranslatorError(
                 f"{method} ({PATH_FLAGS[method]}, --target-domain {cfg.target_domain}): {err}"
@@ -240,7 +274,11 @@ def load_translator(method: str, cfg) -> tuple[TranslatorMethod | None, str]:
         hashes.add(labels.get("model_hash"))
         loaded_files.append(file)
         started_from = source[1].get("started_from")
-        file_labels.append(labels | ({"started_from": started_from} if started_from else {}))
+        file_labels.append(
+            labels
+            | ({"started_from": started_from} if started_from else {})
+            | ({"taught_domain": taught} if taught else {})
+        )
         return translator
 
     obj = checked(path)
@@ -256,6 +294,24 @@ def load_translator(method: str, cfg) -> tuple[TranslatorMethod | None, str]:
     return TranslatorMethod(
         method, obj, seeds, model_hashes, tuple(loaded_files), tuple(file_labels)
     ), why
+
+
+def _check_taught(method: str, file: Path, taught: dict | None) -> None:
+    """Refuses a distilled file taught otherwise than `method` reports (`TAUGHT_ON_FILE`)."""
+    if method not in TAUGHT_ON_FILE or TAUGHT_ON_FILE[method] == (taught is not None):
+        return
+    if taught is None:
+        why = (
+            "was taught in its target domain itself (no taught_domain record): it is the"
+            f" privileged distilled translator; score it as ccgan_sim ({PATH_FLAGS['ccgan_sim']})"
+        )
+    else:
+        why = (
+            f"was taught on the Domain file {taught.get('path')} (sha256"
+            f" {str(taught.get('sha256'))[:12]}), not in its target: score it as ccgan_ident"
+            f" ({PATH_FLAGS['ccgan_ident']})"
+        )
+    raise TranslatorError(f"{method} ({PATH_FLAGS[method]}): {file} {why}")
 
 
 def check_translator_arms(translators: dict, arm, *also) -> None:

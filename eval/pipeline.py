@@ -148,6 +148,9 @@ class EvalConfig:
     ccgan_sim_path: str | None = None
     """Checkpoint of the distilled translator, labelled "distill" (None:
     CCGAN_SIM_DEFAULT_PATH)."""
+    ccgan_ident_path: str | None = None
+    """Checkpoint of the translator distilled on an identified arm (`ccgan.distill
+    --teach-domain`), labelled "distill" for target_domain (None: IDENT_DEFAULT_PATH)."""
     trust_unlabelled_translators: bool = False
     """Score translator files that do not record their method, domains and arm (the solid-disc
     arm's, results/solid/translators/); labelled files are always checked."""
@@ -196,7 +199,7 @@ class EvalConfig:
             "target_domain",
             f"must be one of {targets}, got {self.target_domain!r}",
         )
-        for field in ("ccgan_path", "wcgan_path", "ccgan_sim_path"):
+        for field in ("ccgan_path", "wcgan_path", "ccgan_sim_path", "ccgan_ident_path"):
             _check_file(field, getattr(self, field))
         require(isinstance(self.oracle, OracleConfig), "oracle", "must be an OracleConfig")
         rod.check_simulator(self)
@@ -403,6 +406,7 @@ def evaluate(cfg: EvalConfig, command: str = "", log=print) -> dict:
     oracle_out = finish_oracle(plan, oracle_future, run)
     table, trajectories = score(plan, commands_of, poses_of, oracle_out, log)
     noise, periodicity = robustness(plan, trajectories, poses_of)
+    taught = taught_domains(translators, arm_s, arm_c)
     results = {
         "command": command,
         "machine": machine_description(),
@@ -415,6 +419,7 @@ def evaluate(cfg: EvalConfig, command: str = "", log=print) -> dict:
         | {"xml": None if cfg.xml is None else "custom", "model_path": model["file"]},
         "methods_run": plan.methods,
         "notes": run.notes,
+        **({"taught_domains": taught} if taught else {}),
         "stretch_k": plan.k_stretch,
         "stretch_validation_x_err_cm": {str(k): v for k, v in plan.k_errors.items()},
         "table": table,
@@ -523,6 +528,38 @@ def _plan(cfg: EvalConfig, arm_s, arm_c, translators: dict, run: RunLog, rods=No
         rollout_backend=backend,
         tracker_arm=arm_c if rods is not None else None,
     )
+
+
+def taught_domains(translators: dict[str, TranslatorMethod], arm_s, arm_c) -> dict:
+    """{method: what its files record they were taught on, beside the truth} for the translators
+    distilled on a Domain file (`ccgan.translator.taught_domain`, e.g. ccgan_ident): {"files":
+    {file: the Domain file's sha256}, "path", "sha256", "method" and "values" of the first file's
+    record, "truth": the physical values of the target the table is scored in
+    (`mjx_arm.domains.physical_values` of `arm_c`, the chain in cfg.target_domain; `arm_s`
+    its source) and "error_pct": each identified value against it}. Empty when none was."""
+    from mjx_arm import domains
+
+    truth = domains.physical_values(arm_c.mj_model, arm_s.mj_model, arm_c.domain)
+    out = {}
+    for method, tr in translators.items():
+        records = [labels.get("taught_domain") for labels in tr.labels]
+        if not any(records):
+            continue
+        first = next(r for r in records if r)
+        values = first.get("values") or {}
+        files = zip(tr.files, records, strict=True)
+        out[method] = {
+            "files": {str(f): (r or {}).get("sha256") for f, r in files},
+            **{key: first.get(key) for key in ("path", "sha256", "method", "domain")},
+            "values": values,
+            "truth": truth,
+            "error_pct": {
+                name: 100.0 * (values[name] / truth[name] - 1.0)
+                for name in truth
+                if isinstance(values.get(name), int | float)
+            },
+        }
+    return out
 
 
 def _rod_description(plan: Plan) -> dict:

@@ -69,6 +69,7 @@ FINDINGS_BASES = {
     "ccgan": ("none", "stretch", "wcgan", "mpc"),
     "ccgan_sim": ("none", "stretch", "ccgan", "wcgan", "mpc"),
     "wcgan": ("none", "stretch"),
+    "ccgan_ident": ("none", "stretch", "ccgan_sim", "mpc"),
 }
 
 
@@ -129,6 +130,7 @@ def markdown_report(results: dict) -> str:
     stated when results has them (older shapes.json files have neither and render as before).
     """
     lines = _header(results) + _main_table(results) + _excursion_table(results)
+    lines += taught_section(results)
     lines += _fc_table(results)
     lines += _oracle_table(results)
     found = findings(results)
@@ -199,6 +201,55 @@ def _main_table(results: dict) -> list[str]:
             cells.append(cell)
         lines.append(f"| {shape} | " + " | ".join(cells) + " |")
     return lines
+
+
+#: The physical values an identified arm is set beside the truth by (`mjx_arm.domains.
+#: physical_values`), with what each is.
+TAUGHT_FIELDS = {
+    "viscosity_scale": "medium viscosity / the source medium's",
+    "stiffness_scale": "joint stiffness factor",
+    "mass_scale": "mass factor",
+}
+
+
+def taught_section(results: dict) -> list[str]:
+    """The translators taught on an identified arm (shapes.json's "taught_domains", written by
+    `eval.pipeline.taught_domains`): what each was taught on, the identified values beside the
+    truth of the target the table was scored in, and which distilled translator is privileged.
+    Empty for runs without one."""
+    taught = results.get("taught_domains") or {}
+    if not taught:
+        return []
+    target = results["config"].get("target_domain", "constrained")
+    rod = results.get("simulator") == "rod"
+    lines = ["", "## Taught on the identified arm (data-only)", ""]
+    for method, record in taught.items():
+        how = f" by {record['method']}" if record.get("method") else ""
+        lines += [
+            f"{METHOD_NAMES.get(method, method)} ({method}) was distilled on an arm identified"
+            f" from the target's data{how} (`{record['path']}`, sha256"
+            f" {str(record['sha256'])[:16]}): its teacher planned, its iterate was picked and its"
+            " k was chosen in that arm, and it is scored here in the true target like every"
+            " method."
+            + (
+                f" {METHOD_NAMES['ccgan_sim']} (ccgan_sim) was taught in the true target itself:"
+                " the privileged upper bound."
+                if "ccgan_sim" in results["methods_run"]
+                else ""
+            ),
+            "",
+            f"| value | identified | truth ({'the chain in ' if rod else ''}{target}) | error |",
+            "|---|---|---|---|",
+        ]
+        for name, what in TAUGHT_FIELDS.items():
+            value, truth = record["values"].get(name), record["truth"].get(name)
+            if value is None or truth is None:
+                continue
+            error = record.get("error_pct", {}).get(name)
+            shown = "-" if error is None else f"{error:+.3f}%"
+            lines.append(f"| {name} ({what}) | {value:.5g} | {truth:.5g} | {shown} |")
+        lines.append("")
+    return lines[:-1]
 
 
 def _excursion_table(results: dict) -> list[str]:

@@ -37,6 +37,7 @@ from ccgan.translator import DEFAULT_PATH, LINEAR_TRANSLATORS_DIR, TRANSLATORS_D
 from eval.methods import (
     CCGAN_SIM_DEFAULT_PATH,
     DEFAULT_METHODS,
+    IDENT_DEFAULT_PATH,
     METHOD_ALIASES,
     METHOD_NAMES,
     METHODS,
@@ -327,6 +328,15 @@ def _add_arm_options(p: argparse.ArgumentParser) -> None:
         f" (default: {_shown(CCGAN_SIM_DEFAULT_PATH)}, skipped if absent)",
     )
     p.add_argument(
+        "--identified-path",
+        metavar="CKPT",
+        default=None,
+        help="translator distilled on an arm identified from the target's data (ccgan.distill"
+        " --teach-domain; labelled 'distill' for --target-domain, recording its Domain file),"
+        " scored as ccgan_ident in the true --target-domain at the k it holds (default:"
+        f" {_shown(IDENT_DEFAULT_PATH)}, skipped if absent)",
+    )
+    p.add_argument(
         TRUST_FLAG,
         action="store_true",
         help="score translator files that do not record their method, domains and arm (the"
@@ -412,6 +422,7 @@ def parse_args(argv: list[str] | None = None) -> EvalConfig:
             ccgan_path=a.ccgan_path,
             wcgan_path=a.wcgan_path,
             ccgan_sim_path=a.distilled_path,
+            ccgan_ident_path=a.identified_path,
             trust_unlabelled_translators=a.trust_unlabelled_translators,
             target_domain=a.target_domain,
             oracle=OracleConfig(

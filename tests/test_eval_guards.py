@@ -560,13 +560,18 @@ def test_unlabelled_translators_need_the_trust_flag(small_xml, tmp_path, monkeyp
     assert shapes.parse_args([*argv, "--trust-unlabelled-translators"]).trust_unlabelled_translators
 
 
+#: The translator methods the committed runs hold files of: the translator taught on the
+#: identified arm (ccgan_ident, the chain's ident_sim stage) is in no committed run yet.
+COMMITTED_METHODS = tuple(m for m in methods.TRANSLATOR_METHODS if m != "ccgan_ident")
+
+
 @pytest.mark.parametrize(
     "run, target, paths",
     [
-        ("rerun_2026-11-27/run", "constrained", {m: m for m in methods.TRANSLATOR_METHODS}),
+        ("rerun_2026-11-27/run", "constrained", {m: m for m in COMMITTED_METHODS}),
         # The rerun made no aged CCGAN-GP, only the distilled one.
         ("rerun_2026-11-27/run", "aged", {"ccgan_sim": "aged_sim"}),
-        ("run", "constrained", {m: m for m in methods.TRANSLATOR_METHODS}),
+        ("run", "constrained", {m: m for m in COMMITTED_METHODS}),
         ("run", "aged", {"ccgan": "aged", "ccgan_sim": "aged_sim"}),
     ],
 )
@@ -593,7 +598,7 @@ def test_default_translators_are_refused_for_the_aged_arm(in_tmp):
     """The default translators translate into D_c, and the default run folder has no aged
     CCGAN-GP: --target-domain aged without paths stops before any work, naming the flag and
     both domains, never scoring D_c's translators on the aged arm."""
-    for method in methods.TRANSLATOR_METHODS:
+    for method in COMMITTED_METHODS:
         with pytest.raises(methods.TranslatorError) as exc:
             methods.load_translator(method, pipeline.EvalConfig(target_domain="aged"))
         message = str(exc.value)
