@@ -212,28 +212,30 @@ TAUGHT_FIELDS = {
 }
 
 
-def taught_section(results: dict) -> list[str]:
+def taught_section(results: dict, heading: bool = True) -> list[str]:
     """The translators taught on an identified arm (shapes.json's "taught_domains", written by
     `eval.pipeline.taught_domains`): what each was taught on, the identified values beside the
-    truth of the target the table was scored in, and which distilled translator is privileged.
-    Empty for runs without one."""
+    truth of the target the table was scored in, and which distilled translator is privileged;
+    under its own heading unless `heading` is False (a report that has one). Empty for runs
+    without one."""
     taught = results.get("taught_domains") or {}
     if not taught:
         return []
     target = results["config"].get("target_domain", "constrained")
     rod = results.get("simulator") == "rod"
-    lines = ["", "## Taught on the identified arm (data-only)", ""]
+    lines = ["", "## Taught on the identified arm (data-only)"] if heading else []
+    lines.append("")
     for method, record in taught.items():
         how = f" by {record['method']}" if record.get("method") else ""
         lines += [
-            f"{METHOD_NAMES.get(method, method)} ({method}) was distilled on an arm identified"
-            f" from the target's data{how} (`{record['path']}`, sha256"
+            f'{method} ("{METHOD_NAMES.get(method, method)}") was distilled on an arm'
+            f" identified from the target's data{how} (`{record['path']}`, sha256"
             f" {str(record['sha256'])[:16]}): its teacher planned, its iterate was picked and its"
             " k was chosen in that arm, and it is scored here in the true target like every"
             " method."
             + (
-                f" {METHOD_NAMES['ccgan_sim']} (ccgan_sim) was taught in the true target itself:"
-                " the privileged upper bound."
+                f' ccgan_sim ("{METHOD_NAMES["ccgan_sim"]}") was taught in the true target'
+                " itself: the privileged upper bound."
                 if "ccgan_sim" in results["methods_run"]
                 else ""
             ),

@@ -16,11 +16,13 @@ import argparse
 import json
 from pathlib import Path
 
-from eval.report import METHOD_NAMES, PAPER_TABLE_I
+from eval.report import METHOD_NAMES, PAPER_TABLE_I, taught_section
 from experiments.stages import Chain, digest, shown_command
 
 #: The stages whose shapes.json the report reads: the D_c medium, and the aged arm.
 TABLE_STAGE, AGED_TABLE_STAGE = "table", "table_aged"
+#: The table of the translator distilled on the identified arm beside the privileged one.
+IDENT_TABLE_STAGE = "table_ident"
 #: The same tables scored in the reference rod (`eval.shapes --simulator rod`).
 ROD_TABLE_STAGE, ROD_AGED_TABLE_STAGE = "rod_table", "rod_table_aged"
 #: Column names of the rod's tables: which arm each method learnt or planned on.
@@ -257,6 +259,7 @@ README_METHODS = (
     ("ccgan", "CCGAN-GP"),
     ("wcgan", "WCGAN-GP"),
     ("ccgan_sim", METHOD_NAMES["ccgan_sim"]),
+    ("ccgan_ident", METHOD_NAMES["ccgan_ident"]),
     ("mpc", METHOD_NAMES["mpc"]),
     ("oracle", "oracle, first 2 s"),
 )
@@ -350,6 +353,33 @@ def rod_lines(rod: dict, chain_results: dict | None, rod_aged: dict | None = Non
     return lines
 
 
+def ident_lines(results: dict) -> list[str]:
+    """The table of the translator distilled on the identified arm (ccgan_ident) beside the one
+    taught in the true target (ccgan_sim, the privileged upper bound), its ratios to that one and
+    to stretch only, and the identified values beside the truth (`eval.report.taught_section`)."""
+    table, methods = results["table"], results["methods_run"]
+    lines = [
+        "The distilled translator taught on the arm identified from the D_c babbling alone"
+        " (its teacher, iterate and k all in that arm), scored in the true D_c simulator beside"
+        " the one taught in the true D_c arm. X_err (cm) / phi_err (rad), then % of the shape's"
+        " excursion:",
+        "",
+        *readme_tables(results),
+        "",
+    ]
+    if "ccgan_ident" in methods:
+        for base in (b for b in ("ccgan_sim", "stretch") if b in methods):
+            ratios = [
+                rows["ccgan_ident"]["x_err_cm_mean"] / rows[base]["x_err_cm_mean"]
+                for rows in table.values()
+            ]
+            lines.append(
+                f"- {METHOD_NAMES['ccgan_ident']} / {METHOD_NAMES[base]}:"
+                f" {min(ratios):.2f}-{max(ratios):.2f}"
+            )
+    return lines + taught_section(results, heading=False)
+
+
 def write(chain: Chain, config: dict, config_path: Path) -> Path:
     """Writes chain.out/paper.md from the finished stages; returns its path."""
     results = _shapes(chain, TABLE_STAGE)
@@ -371,6 +401,9 @@ def write(chain: Chain, config: dict, config_path: Path) -> Path:
         lines += ["", f"Full tables: `{TABLE_STAGE}/shapes.md`"]
         if aged is not None:
             lines[-1] += f", the aged arm's `{AGED_TABLE_STAGE}/shapes.md`."
+    ident = _shapes(chain, IDENT_TABLE_STAGE)
+    if ident is not None:
+        lines += ["", "## Taught on the identified arm (data-only)", "", *ident_lines(ident)]
     rod, rod_aged = _shapes(chain, ROD_TABLE_STAGE), _shapes(chain, ROD_AGED_TABLE_STAGE)
     if rod is not None:
         lines += ["", "## In the reference rod (the paper's simulator)", ""]

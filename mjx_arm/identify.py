@@ -545,6 +545,12 @@ def _check_config(method: str, config):
     return config
 
 
+def build_parser():
+    """``python -m mjx_arm.identify``'s parser (`identify_cli.build_parser` with METHODS), which
+    the chain's config checks read like every command's."""
+    return identify_cli.build_parser(METHODS)
+
+
 def main(argv: list[str] | None = None) -> int:
     """``python -m mjx_arm.identify``: `identify_cli.main` with this module's `identify`."""
     return identify_cli.main(argv, identify, METHODS)
