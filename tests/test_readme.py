@@ -12,7 +12,7 @@ RUN = paper.REPO / "results" / "paper" / "rerun_2026-11-27" / "run"
 
 
 #: The tables scored in the reference rod with the committed chain's translators.
-ROD_RUN = paper.REPO / "results" / "paper" / "rod_2026-11-28"
+ROD_RUN = paper.REPO / "results" / "paper" / "rod_chain_2026-11-28"
 
 
 @pytest.mark.parametrize(
