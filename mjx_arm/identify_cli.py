@@ -152,7 +152,9 @@ def find_files(data: str | Path, domain: str | None) -> tuple[Path, Path | None]
 def truth_values(ds: dataset.Dataset, model, fit) -> dict | None:
     """The fitted fields' true values where the chain made the data in a known domain: the
     viscosity as a factor on the MJCF's, the stiffness scale; None for the rod's data or a
-    domain with another mass scale."""
+    domain with another mass scale. Read from the Domain fields in the data's metadata, so a
+    medium that is not built in (a `Domain` of its own values, as `studies.identify_targets`
+    babbles) has its truth too."""
     if ds.model_hash.startswith("rod-") or ds.config.get("backend") == "rod":
         return None
     fields = {k: v for k, v in ds.domain_fields.items() if k != "name"}
@@ -287,7 +289,13 @@ def markdown(report: dict) -> str:
         f" programs of {d['duration_s']:g} s fitted, {d['n_val']} held out"
         + (f" (`{d['val']}`)" if d["val"] else "")
         + ". Truth: "
-        + ("the data's domain." if truth else "unknown (not the chain in a Domain).")
+        + (
+            f"the data's domain, {d['domain']} ("
+            + ", ".join(f"{k} {v:.5g}" for k, v in truth.items())
+            + ")."
+            if truth
+            else "unknown (not the chain in a Domain)."
+        )
         + f" Machine: {report['machine']['cpu']}, usable cores: {report['machine']['cores']}"
         f" (JAX on {report['machine']['jax_backend']}).",
         "",

@@ -191,3 +191,76 @@ def test_gradient_recovers_viscosity_and_stiffness(xml, data):
     assert result.val_rms_cm < 0.1 * result.base_val_rms_cm
     windows = {h.get("window_s") for h in result.history if "window_s" in h}
     assert windows == {2.0, 3.0}  # 1.5 s rounds up to whole chunks (10 periods, 1 s)
+
+
+def test_a_medium_of_its_own_values_is_identified_beside_its_truth(xml, tmp_path):
+    """A medium that is no built-in domain (studies.identify_targets' half and double drag):
+    its babbling's metadata carries the Domain's values, identify.md prints them as the truth."""
+    from mjx_arm import dataset
+    from studies import identify_targets
+
+    model = tmp_path / "small.xml"
+    model.write_text(xml)
+    dc = identify_targets.dc_viscosity_scale(str(model))
+    unit = mjx_arm.load(xml=xml, domain=mjx_arm.Domain(viscosity_scale=1.0)).mj_model
+    constrained = mjx_arm.load(xml=xml, domain="constrained").mj_model
+    assert dc == pytest.approx(constrained.opt.viscosity / unit.opt.viscosity)
+    domain = identify_targets.medium_domain("double_drag", str(model))
+    assert (domain.viscosity_scale, domain.stiffness_scale) == (pytest.approx(2 * dc), 1.0)
+    made = identify_targets.babble_medium(domain, 3, 1, 3.0, str(model))
+    assert sorted(made) == ["double_drag_train.npz", "double_drag_val.npz"]
+    dataset.save_folder(tmp_path / "babble", made)
+    out = tmp_path / "out"
+    argv = ["--data", str(tmp_path / "babble"), "--out", str(out), "--model", str(model)]
+    identify.main([*argv, "--fit", "viscosity_scale", "--no-progress"])
+    report = json.loads((out / "identify.json").read_text())
+    assert report["truth"] == {"viscosity_scale": pytest.approx(2 * dc)}
+    assert abs(report["results"]["search"]["error_pct"]["viscosity_scale"]) < 0.1
+    table = (out / "identify.md").read_text()
+    assert f"the data's domain, double_drag (viscosity_scale {2 * dc:.5g})" in table
+
+
+def test_command_line_takes_the_rods_data(xml, tmp_path):
+    """A file of the rod's model hash (here chain poses under that label, 6 s programs) is
+    fitted with no truth: the rod is not a chain Domain."""
+    from mjx_arm import dataset
+
+    model = tmp_path / "small.xml"
+    model.write_text(xml)
+    config = babble.BabbleConfig(duration_s=6.0)
+    programs = babble_programs(config, np.arange(3), domain="constrained", split="train")
+    poses = mjx_arm.load(xml=xml, domain=TRUTH).rollout(programs, backend="c")
+    ds = dataset.Dataset(
+        pressures_bar=programs,
+        poses=poses,
+        pose_low=poses.min((0, 1)),
+        pose_high=poses.max((0, 1)),
+        domain="constrained",
+        domain_fields=dataclasses.asdict(mjx_arm.Domain(name="constrained", viscosity_scale=None)),
+        model_hash="rod-0123456789abcdef",
+        seed=0,
+        config={"backend": "rod"},
+    )
+    dataset.save_dataset(tmp_path / "constrained_train.npz", ds)
+    out = tmp_path / "out"
+    argv = ["--data", str(tmp_path / "constrained_train.npz"), "--out", str(out)]
+    identify.main([*argv, "--model", str(model), "--fit", "viscosity_scale", "--no-progress"])
+    report = json.loads((out / "identify.json").read_text())
+    assert report["truth"] is None and report["data"]["duration_s"] == 6.0
+    assert report["results"]["search"]["values"]["viscosity_scale"] > 0
+    assert "Truth: unknown" in (out / "identify.md").read_text()
+
+
+def test_targets_study_refuses_a_rod_case_without_its_data(tmp_path, capsys):
+    from studies import identify_targets
+
+    for argv, match in [
+        (["--case", "rod"], "--case rod needs --rod-data"),
+        (["--case", "rod", "--rod-data", str(tmp_path / "none")], "no such file or folder"),
+        (["--case", "kite"], "invalid choice"),
+    ]:
+        with pytest.raises(SystemExit) as stop:
+            identify_targets.main(["--out", str(tmp_path / "out"), *argv])
+        assert stop.value.code == 2
+        assert match in capsys.readouterr().err
+    assert not (tmp_path / "out").exists()
