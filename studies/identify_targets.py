@@ -21,8 +21,9 @@ Cases (each run by ``--case``; every run rewrites the table from all the case fo
     python -m studies.identify_targets --out studies/results/cpu/identify --case rod \\
         --rod-data /work/rod_data_gpu/babble --rod-n-programs 10
 
-Writes OUT/<case>/ (babble/ for the media, identify.json and identify.md, `mjx_arm.identify`'s
-report) and OUT/targets.{md,json}: one row per case and method. Never a test shape.
+Writes OUT/<case>/ (the rod's as OUT/rod_<N>/, N its training programs): babble/ for the
+media, and `mjx_arm.identify`'s report identify.json and identify.md; then OUT/targets.{md,json}:
+one row per case and method. Never a test shape.
 """
 
 from __future__ import annotations
@@ -118,9 +119,17 @@ def run_identify(argv: list[str]) -> dict:
     return identify_cli.run(args, parser, argv, identify.identify, identify.METHODS)
 
 
+def case_folder(case: str, args: argparse.Namespace) -> str:
+    """The folder name of a case: the rod's carries its number of training programs
+    (``rod_10``; ``rod_all`` for the whole file), so fits on more programs sit beside it."""
+    if case != "rod":
+        return case
+    return f"rod_{args.rod_n_programs or 'all'}"
+
+
 def run_case(case: str, args: argparse.Namespace, out: Path, study_command: str) -> dict:
-    """Runs one case into out/<case>/ and returns its summary (also written as case.json)."""
-    folder = out / case
+    """Runs one case into out/`case_folder`/ and returns its summary (also its case.json)."""
+    folder = out / case_folder(case, args)
     started = time.perf_counter()
     common = ["--method", args.method, "--out", str(folder), "--no-progress"]
     if case in MEDIA:
@@ -144,7 +153,8 @@ def run_case(case: str, args: argparse.Namespace, out: Path, study_command: str)
             )
         }
     summary |= {
-        "case": case,
+        "case": folder.name,
+        "kind": case,
         "study_command": study_command,
         "command": report["command"],
         "data": report["data"],
@@ -270,11 +280,9 @@ def main(argv: list[str] | None = None) -> int:
     header = run_header("studies.identify_targets", argv)
     for case in args.case:
         run_case(case, args, out, header["command"])
-    summaries = [
-        json.loads((out / case / "case.json").read_text())
-        for case in CASES
-        if (out / case / "case.json").is_file()
-    ]
+    summaries = [json.loads(path.read_text()) for path in out.glob("*/case.json")]
+    # Summaries written before "kind" was recorded are the media's, named after their case.
+    summaries.sort(key=lambda s: (CASES.index(s.get("kind", s["case"])), s["data"]["n_train"]))
     write_results(
         out / "targets",
         header,
