@@ -403,7 +403,11 @@ def write(chain: Chain, config: dict, config_path: Path) -> Path:
             lines[-1] += f", the aged arm's `{AGED_TABLE_STAGE}/shapes.md`."
     ident = _shapes(chain, IDENT_TABLE_STAGE)
     if ident is not None:
-        lines += ["", "## Taught on the identified arm (data-only)", "", *ident_lines(ident)]
+        # Paths as the commands above name them: DIR for the run folder, wherever it ran.
+        taught = ["", "## Taught on the identified arm (data-only)", "", *ident_lines(ident)]
+        for folder in {str(chain.out.resolve()), str(chain.out.absolute())}:
+            taught = [line.replace(folder, "DIR") for line in taught]
+        lines += taught
     rod, rod_aged = _shapes(chain, ROD_TABLE_STAGE), _shapes(chain, ROD_AGED_TABLE_STAGE)
     if rod is not None:
         lines += ["", "## In the reference rod (the paper's simulator)", ""]
