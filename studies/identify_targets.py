@@ -16,6 +16,10 @@ Cases (each run by ``--case``; every run rewrites the table from all the case fo
   instead the held-out tip RMS against the rod of three chain arms on the same held-out
   programs: the nominal start (viscosity x10 the source's, stiffness 1, the paper's), the chain's
   committed D_c (20.117, 1) and the fitted arm.
+- ``rod_k``: stretch only's k on eval's validation program (`mjx_arm.programs.validation_program`,
+  20 s; `tracking.held.choose_stretch_k`, as `eval.shapes` picks it) in the rod (float64), in the
+  committed D_c and in each identified arm of the rod cases already in --out (MuJoCo C): whether
+  an arm identified from the rod's babbling chooses the rod's k. Writes OUT/rod_k/rod_k.json.
 
     python -m studies.identify_targets --out studies/results/cpu/identify --case half_drag
     python -m studies.identify_targets --out studies/results/cpu/identify --case rod \\
@@ -38,12 +42,14 @@ import numpy as np
 
 from bench import run_header, write_results
 from mjx_arm import arm as arm_lib
-from mjx_arm import babble, dataset, domains, identify, identify_cli
+from mjx_arm import babble, dataset, domains, identify, identify_cli, identify_family
 from studies.checks import parse_checked_args
 
 #: Each custom medium's viscosity as a factor on D_c's (stiffness 1).
 MEDIA = {"half_drag": 0.5, "double_drag": 2.0}
-CASES = (*MEDIA, "rod")
+CASES = (*MEDIA, "rod", "rod_k")
+#: Hold factors the rod_k case compares: eval's stretch only candidates around D_c's best.
+K_CANDIDATES = (10, 15, 20, 25)
 #: The rod case starts from the paper's nominal medium: ten times the source's viscosity.
 NOMINAL_VISCOSITY_SCALE = 10.0
 #: The babbling seed of the custom media (their streams are named after the case).
@@ -175,6 +181,58 @@ def run_case(case: str, args: argparse.Namespace, out: Path, study_command: str)
     return summary
 
 
+def run_rod_k(out: Path, study_command: str, model=None) -> dict:
+    """The rod_k case: stretch only's validation X_err by k in the rod, the committed D_c and the
+    identified arms of out/rod_<N>/case.json; written to out/rod_k/rod_k.json and returned."""
+    from mjx_arm import load, load_rod, programs
+    from tracking.held import choose_stretch_k
+
+    program = programs.validation_program(20.0)
+    arms = {"the rod (D_c, float64)": (load_rod("source"), load_rod("constrained"), "rod")}
+    arm_s = load(model, domain="source")
+    arms["committed D_c"] = (arm_s, load(model, domain=domains.CONSTRAINED), "c")
+    for path in sorted(out.glob("rod_*/case.json")):
+        case = json.loads(path.read_text())
+        for method, r in case["results"].items():
+            v = r["values"]
+            domain = domains.Domain(name=f"identified ({method}, {case['case']})", **v)
+            arms[domain.name] = (arm_s, load(model, domain=domain), "c")
+    rows = []
+    for name, (source, target, backend) in arms.items():
+        k, errors = choose_stretch_k(source, target, program, K_CANDIDATES, backend, False)
+        values = {} if backend == "rod" else identify_family.base_values(target)
+        errors = {str(hold): float(err) for hold, err in errors.items()}  # as JSON keeps them
+        rows.append({"arm": name, "k": k, "x_err_cm_by_k": errors, "values": values})
+    result = {"study_command": study_command, "candidates": list(K_CANDIDATES), "rows": rows}
+    (out / "rod_k").mkdir(parents=True, exist_ok=True)
+    (out / "rod_k" / "rod_k.json").write_text(json.dumps(result, indent=1, default=float) + "\n")
+    return result
+
+
+def rod_k_lines(result: dict) -> list[str]:
+    """The rod_k case's table: stretch only's k and its validation X_err by k, per arm."""
+    ks = result["candidates"]
+    lines = [
+        "",
+        "Stretch only's k on eval's validation program (20 s), chosen in each arm (rod_k):",
+        "",
+        "| arm | viscosity_scale, stiffness_scale | chosen k | "
+        + " | ".join(f"X_err k = {k}" for k in ks)
+        + " |",
+        "|---|---|---|" + "---|" * len(ks),
+    ]
+    for r in result["rows"]:
+        v = r["values"]
+        shown = f"{v['viscosity_scale']:.5g}, {v['stiffness_scale']:.4g}" if v else "-"
+        errors = r["x_err_cm_by_k"]
+        cells = " | ".join(
+            f"{errors[str(k)] if str(k) in errors else errors[k]:.3f} cm" for k in ks
+        )
+        lines.append(f"| {r['arm']} | {shown} | {r['k']} | {cells} |")
+    lines += ["", f"Command: `{result['study_command']}`"]
+    return lines
+
+
 def table(summaries: list[dict]) -> list[str]:
     """The body of targets.md: one row per case and method, then the rod's comparison."""
     lines = [
@@ -279,16 +337,23 @@ def main(argv: list[str] | None = None) -> int:
     out = Path(args.out)
     header = run_header("studies.identify_targets", argv)
     for case in args.case:
-        run_case(case, args, out, header["command"])
+        if case == "rod_k":
+            run_rod_k(out, header["command"], args.model)
+        else:
+            run_case(case, args, out, header["command"])
     summaries = [json.loads(path.read_text()) for path in out.glob("*/case.json")]
     # Summaries written before "kind" was recorded are the media's, named after their case.
     summaries.sort(key=lambda s: (CASES.index(s.get("kind", s["case"])), s["data"]["n_train"]))
+    body = table(summaries)
+    rod_k = out / "rod_k" / "rod_k.json"
+    if rod_k.exists():
+        body += rod_k_lines(json.loads(rod_k.read_text()))
     write_results(
         out / "targets",
         header,
         {"cases": summaries},
         "Identification beyond the paper's pair: custom media and the reference rod",
-        table(summaries),
+        body,
     )
     return 0
 
