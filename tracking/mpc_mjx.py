@@ -15,6 +15,11 @@ bookkeeping, none in the result: the state after the applied command is the chos
 candidate's end state (`mpc` rolls it out once more). MJX runs in float32, MuJoCo C in float64,
 so the two trackers' commands differ by the rounding that the Jacobian sees
 (tests/test_mpc_mjx.py bounds the difference of their tracking).
+
+Media (issue 51): `track(..., media=(family, theta [S, P]))` plans program s in the medium
+`family.model(theta[s])` (`mjx_arm.identify_family.DomainFamily`), from that medium's rest, in
+the same jitted program: the planner is vmapped over the model as over the programs, as MuJoCo
+Playground randomises domains. Without media every program shares `arm_c`'s model, as before.
 """
 
 from __future__ import annotations
@@ -37,15 +42,30 @@ from tracking.mpc import LINE_STEPS, MpcConfig, _batched
 CHUNK_STEPS = 25
 
 
-def _planner(arm_c: Arm, k: int, cfg: MpcConfig):
-    """`advance(mjx_model, carry, x0 [S, n, 3], target [S, n, 6]) -> (carry, applied [S, n, 3],
+def _planner(arm_c: Arm, k: int, cfg: MpcConfig, family=None):
+    """`advance(medium, carry, x0 [S, n, 3], target [S, n, 6]) -> (carry, applied [S, n, 3],
     cost [S, n], healthy [S])` over n source steps of S programs (jitted).
 
-    carry: (MJX data [S], valve pressure [S, 3] bar, healthy [S]); x0: where each step's plan
-    starts (bar); target: the pose to reach after each held step (m, unit d3).
+    medium: without `family`, the MJX model every program shares (`arm_c.mjx_model`); with a
+    `DomainFamily`, its log-parameters theta [S, P], one medium per program. carry: (MJX data
+    [S], valve pressure [S, 3] bar, healthy [S]); x0: where each step's plan starts (bar);
+    target: the pose to reach after each held step (m, unit d3).
     """
     import jax
     import jax.numpy as jnp
+
+    from mjx_arm.arm import control_period
+
+    if family is None:
+        period_of = arm_c.period_fn
+    else:
+        period_kwargs = arm_c.period_kwargs()
+
+        def period_of(theta):
+            """One control period in the medium of theta [P]: its model fields and its chamber
+            controls (a softer arm's chambers stretch it further)."""
+            controls = family.controls(theta)
+            return control_period(family.model(theta), **(period_kwargs | {"controls": controls}))
 
     lo, hi = arm_c.valve.p_min_bar, arm_c.valve.p_max_bar
     w = cfg.orientation_weight_cm_per_rad
@@ -57,9 +77,9 @@ def _planner(arm_c: Arm, k: int, cfg: MpcConfig):
             [100.0 * (poses[..., :3] - target[:3]), w * (poses[..., 3:] - target[3:])], -1
         )
 
-    def plan_one(mjx_model, carry, x0, target):
+    def plan_one(medium, carry, x0, target):
         """One source step of one program: the new carry, the applied command, its cost."""
-        period = arm_c.period_fn(mjx_model)
+        period = period_of(medium)
 
         def hold(command):
             """The end carry and pose of `command` held k periods from `carry`."""
@@ -107,16 +127,18 @@ def _planner(arm_c: Arm, k: int, cfg: MpcConfig):
         (x, _, new_carry, cost), _ = jax.lax.scan(phase, start, phases)
         return new_carry, x, cost
 
-    def advance(mjx_model, carry, x0, target):
+    medium_axis = None if family is None else 0  # shared model, or one medium per program
+
+    def advance(medium, carry, x0, target):
         # The Gauss-Newton algebra at the physics' precision (full float32 by default).
         with mjx_arm_arm.mjx_precision():
-            return _advance(mjx_model, carry, x0, target)
+            return _advance(medium, carry, x0, target)
 
-    def _advance(mjx_model, carry, x0, target):
+    def _advance(medium, carry, x0, target):
         def step(carry, inputs):
             x0_n, target_n = inputs
-            carry, applied, cost = jax.vmap(plan_one, in_axes=(None, 0, 0, 0))(
-                mjx_model, carry, x0_n, target_n
+            carry, applied, cost = jax.vmap(plan_one, in_axes=(medium_axis, 0, 0, 0))(
+                medium, carry, x0_n, target_n
             )
             return carry, (applied, cost)
 
@@ -139,14 +161,22 @@ class TrackingStopped(RuntimeError):
         super().__init__(f"tracking stopped after {steps_done} of {n_steps} source steps{where}")
 
 
-def _fingerprint(arm_c: Arm, k: int, cfg: MpcConfig, init, target, chunk_steps: int) -> str:
+def _fingerprint(
+    arm_c: Arm, k: int, cfg: MpcConfig, init, target, chunk_steps: int, media=None
+) -> str:
     """What a resume file must match: the arm and its medium, k, the settings, the inputs and the
-    chunking (two domains share the MJCF's hash, so the domain is named on its own)."""
+    chunking (two domains share the MJCF's hash, so the domain is named on its own), and the
+    per-program media (their family's fields and theta [S, P]) where given."""
     h = hashlib.sha256()
     precision = mjx_arm_arm.MJX_MATMUL_PRECISION
     domain = getattr(arm_c, "domain", None)
     h.update(repr((arm_c.model_hash, domain, k, cfg, chunk_steps, precision)).encode())
-    for a in (init, target):
+    arrays = [init, target]
+    if media is not None:
+        family, theta = media
+        h.update(repr((family.fit, family.arm.domain)).encode())
+        arrays.append(theta)
+    for a in arrays:
         h.update(repr(a.shape).encode())
         h.update(np.ascontiguousarray(a).tobytes())
     return h.hexdigest()
@@ -192,29 +222,70 @@ def _load_progress(path: Path, key: str, carry, log):
 _PLANNERS: dict = {}
 
 
-def _cached_planner(arm_c: Arm, k: int, cfg: MpcConfig):
-    """`_planner`, built once per arm, k and settings in a process: a second call (the next
-    shard of a teacher) reuses the compiled program instead of tracing it again."""
-    key = (id(arm_c), k, cfg, mjx_arm_arm.MJX_MATMUL_PRECISION)  # traced with that precision
-    if key not in _PLANNERS:  # the arm is kept with it, so that its id is not reused
-        _PLANNERS[key] = (arm_c, _planner(arm_c, k, cfg))
-    return _PLANNERS[key][1]
+def _cached_planner(arm_c: Arm, k: int, cfg: MpcConfig, family=None):
+    """`_planner`, built once per arm, k, settings and family in a process: a second call (the
+    next shard of a teacher, or other media of the same family) reuses the compiled program
+    instead of tracing it again."""
+    # Traced with that precision.
+    key = (id(arm_c), k, cfg, mjx_arm_arm.MJX_MATMUL_PRECISION, id(family))
+    if key not in _PLANNERS:  # the arm and family are kept with it, so their ids are not reused
+        _PLANNERS[key] = (arm_c, family, _planner(arm_c, k, cfg, family))
+    return _PLANNERS[key][2]
 
 
-def _rest_carry(arm_c: Arm, n_prog: int):
-    """(MJX data, pressure, healthy) at rest for n_prog programs (float32)."""
+def _rest_carry(arm_c: Arm, n_prog: int, media=None):
+    """(MJX data, pressure, healthy) at rest for n_prog programs (float32): `arm_c`'s rest, or
+    with media (family, theta [S, P]) each program's medium's (`DomainFamily.rest_state`)."""
     import jax
     import jax.numpy as jnp
     from mujoco import mjx
 
     data = mjx.make_data(arm_c.mjx_model)
-    data = data.replace(
-        qpos=jnp.asarray(arm_c.rest_qpos, jnp.float32),
-        qvel=jnp.asarray(arm_c.rest_qvel, jnp.float32),
-    )
-    data = jax.tree.map(lambda leaf: jnp.broadcast_to(leaf, (n_prog,) + leaf.shape), data)
+    if media is None:
+        data = data.replace(
+            qpos=jnp.asarray(arm_c.rest_qpos, jnp.float32),
+            qvel=jnp.asarray(arm_c.rest_qvel, jnp.float32),
+        )
+        data = jax.tree.map(lambda leaf: jnp.broadcast_to(leaf, (n_prog,) + leaf.shape), data)
+    else:
+        family, theta = media
+        qpos, qvel, _ = jax.vmap(family.rest_state)(jnp.asarray(theta, jnp.float32))
+        data = jax.tree.map(lambda leaf: jnp.broadcast_to(leaf, (n_prog,) + leaf.shape), data)
+        data = data.replace(qpos=qpos.astype(jnp.float32), qvel=qvel.astype(jnp.float32))
     pressure = jnp.full((n_prog, 3), arm_c.valve.p_min_bar, jnp.float32)
     return data, pressure, jnp.ones(n_prog, bool)
+
+
+def _check_media(arm_c: Arm, media, n_prog: int):
+    """`media` as (family, theta [S, P] float32), or None.
+
+    Raises:
+      ValueError: not a (DomainFamily, theta) pair, theta not [n_prog, len(family.fit)] and
+        finite, or a family of another arm (MJCF, substeps or valve) than `arm_c`.
+    """
+    if media is None:
+        return None
+    try:
+        family, theta = media
+        fit, base_arm = family.fit, family.arm
+    except (TypeError, ValueError, AttributeError):
+        raise ValueError(
+            "media must be (DomainFamily, theta [S, P]), e.g. (DomainFamily.of(arm_c), theta)"
+        ) from None
+    theta = np.asarray(theta, np.float64)
+    if theta.shape != (n_prog, len(fit)) or not np.isfinite(theta).all():
+        raise ValueError(
+            f"media theta must be finite log-parameters [{n_prog}, {len(fit)}] (one row per"
+            f" program, columns {fit}), got shape {theta.shape}"
+        )
+    same_arm = (
+        base_arm.model_hash == arm_c.model_hash
+        and base_arm.n_substeps == arm_c.n_substeps
+        and base_arm.valve == arm_c.valve
+    )
+    if not same_arm:
+        raise ValueError("the media's family is of another arm (MJCF, substeps or valve)")
+    return family, theta.astype(np.float32)
 
 
 def track(
@@ -228,6 +299,7 @@ def track(
     resume: Path | None = None,
     should_stop: Callable[[], bool] | None = None,
     log=print,
+    media=None,
 ) -> tuple[np.ndarray, dict]:
     """D_c commands that track target poses, planned in MJX (`tracking.mpc.track`'s API).
 
@@ -244,6 +316,11 @@ def track(
         goes on where it stopped; written when `should_stop` stops the run; removed at the end.
         Programs of 60 s at k = 20 outlast a 10-minute call on one GPU.
       should_stop: called after each chunk; True stops the run (`TrackingStopped`).
+      log: where notes on the resume file go.
+      media: None (every program in `arm_c`'s medium), or (family, theta [S, P]): program s is
+        planned in `family.model(theta[s])` from that medium's rest, where family is a
+        `mjx_arm.identify_family.DomainFamily` of `arm_c`'s MJCF and theta its log-parameters
+        (one row per program; with [T, ...] inputs S = 1). k is shared by all programs.
 
     Returns:
       (commands [T * k, 3] or [S, T * k, 3] (bar), each held k periods; info: "cost" [T] or
@@ -252,7 +329,8 @@ def track(
       "resumed_steps" (source steps read from `resume`)).
 
     Raises:
-      ValueError: `mpc.track`'s, a horizon other than 1, or chunk_steps < 1.
+      ValueError: `mpc.track`'s, a horizon other than 1, chunk_steps < 1, or media that are
+        not a family of `arm_c`'s MJCF with theta [S, P] (`_check_media`).
       TrackingStopped: `should_stop` said so, after the progress was written to `resume`.
     """
     import jax.numpy as jnp
@@ -263,10 +341,13 @@ def track(
     if chunk_steps < 1:
         raise ValueError(f"chunk_steps must be >= 1, got {chunk_steps}")
     n_prog, n_steps, _ = targets.shape
+    media = _check_media(arm_c, media, n_prog)
+    family = None if media is None else media[0]
     init = np.clip(init, arm_c.valve.p_min_bar, arm_c.valve.p_max_bar)
     t0 = time.perf_counter()
-    advance = _cached_planner(arm_c, k, cfg)
-    carry = _rest_carry(arm_c, n_prog)
+    advance = _cached_planner(arm_c, k, cfg, family)
+    carry = _rest_carry(arm_c, n_prog, media)
+    medium = arm_c.mjx_model if media is None else jnp.asarray(media[1])
     n_chunks = -(-n_steps // chunk_steps)
     pad = n_chunks * chunk_steps - n_steps  # the last chunk is padded with its last step
     init_p = np.concatenate([init, np.repeat(init[:, -1:], pad, 1)], 1).astype(np.float32)
@@ -274,7 +355,7 @@ def track(
     applied, cost, first = [], [], 0
     key = None
     if resume is not None:
-        key = _fingerprint(arm_c, k, cfg, init_p, target_p, chunk_steps)
+        key = _fingerprint(arm_c, k, cfg, init_p, target_p, chunk_steps, media)
         saved = _load_progress(resume, key, carry, log)
         if saved is not None:
             first, carry, applied, cost = saved
@@ -294,7 +375,7 @@ def track(
     for c in chunks:
         part = slice(c * chunk_steps, (c + 1) * chunk_steps)
         carry, applied_c, cost_c, healthy = advance(
-            arm_c.mjx_model, carry, jnp.asarray(init_p[:, part]), jnp.asarray(target_p[:, part])
+            medium, carry, jnp.asarray(init_p[:, part]), jnp.asarray(target_p[:, part])
         )
         applied.append(np.asarray(applied_c, np.float64))
         cost.append(np.asarray(cost_c, np.float64))
