@@ -36,6 +36,7 @@ from ccgan.translator import (
     translator_labels,
 )
 from mjx_arm import constants
+from mjx_arm.domains import IDENTIFIED
 
 
 def generator_commands(translator: Translator, g_params, samples_s):
@@ -213,14 +214,17 @@ def stage_parser(
     p.add_argument(
         "--domain",
         default="constrained",
-        choices=sorted(d for d in mjx_arm.DOMAINS if d != "source"),
-        help="D_c domain (mjx_arm.DOMAINS): the one the translators translate into",
+        choices=[*sorted(d for d in mjx_arm.DOMAINS if d != "source"), IDENTIFIED],
+        help="D_c domain (mjx_arm.DOMAINS): the one the translators translate into;"
+        f" {IDENTIFIED!r}: an arm known only by its data, the one the --teach-domain file"
+        " describes (`ccgan.distill`; the files are then labelled for it)",
     )
     p.add_argument(
         "--start-domain",
         default=None,
         choices=sorted(d for d in mjx_arm.DOMAINS if d != "source"),
-        help="the domain the --translators were trained for (default: --domain). Another"
+        help="the domain the --translators were trained for (default: --domain; constrained"
+        f" for --domain {IDENTIFIED}). Another"
         " domain's translators only start the stage: what it writes is labelled with --domain"
         " (e.g. the aged arm's distillation started from the D_c CCGAN-GP)",
     )
@@ -303,11 +307,19 @@ def start_stage(p: argparse.ArgumentParser, a, module: str, config: dict, argv) 
         ]
     except checkpoint.CheckpointError as err:
         p.error(f"--translators: {err}")
+    identified = a.domain == IDENTIFIED
+    if identified and not getattr(a, "teach_domain", None):
+        p.error(f"--domain {IDENTIFIED} needs --teach-domain: the file that describes that arm")
+    # An identified arm has no built-in domain: the translators it starts from name theirs
+    # (default constrained), and `ccgan.distill` replaces the arm loaded here with the file's.
+    start_domain = a.start_domain or ("constrained" if identified else a.domain)
     try:
-        arm_s, arm_c = (mjx_arm.load(a.model, domain=d) for d in ("source", a.domain))
+        arm_s, arm_c = (
+            mjx_arm.load(a.model, domain=d)
+            for d in ("source", start_domain if identified else a.domain)
+        )
     except (FileNotFoundError, ValueError) as err:  # ModelValidationError is a ValueError
         p.error(f"--model {a.model}: {err}")
-    start_domain = a.start_domain or a.domain
     for path, (_, meta) in zip(paths, sources, strict=True):
         try:
             check_labels(
