@@ -183,6 +183,7 @@ def plot(rows: list[dict], path) -> None:
     import matplotlib.pyplot as plt
 
     fig, (ax_k, ax_e) = plt.subplots(1, 2, figsize=(9, 3.6))
+    ratios = sorted({r["r"] for r in rows})
     for s in sorted({r["s"] for r in rows}, reverse=True):
         part = sorted((r for r in rows if r["s"] == s), key=lambda r: r["r"])
         rs = [r["r"] for r in part]
@@ -190,6 +191,8 @@ def plot(rows: list[dict], path) -> None:
         ax_e.plot(rs, [r["x_err_cm"][str(r["k"])] for r in part], "o-", label=f"stiffness {s:g}")
     for ax, label in ((ax_k, "best stretch k"), (ax_e, "X_err at best k (cm)")):
         ax.set_xscale("log")
+        ax.set_xticks(ratios, [f"{r:g}" for r in ratios])
+        ax.minorticks_off()
         ax.set_xlabel("drag ratio r (source = 1, paper's D_c = 10)")
         ax.set_ylabel(label)
         ax.grid(alpha=0.3)
