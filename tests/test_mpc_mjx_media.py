@@ -18,6 +18,7 @@ def arms():
     return xml, mjx_arm.load(xml=xml, domain="source"), mjx_arm.load(xml=xml, domain="constrained")
 
 
+@pytest.mark.slow  # 71 s on one core: three MJX tracker compiles (docs/testing.md)
 def test_programs_in_two_media_plan_as_each_alone_in_its_arm(arms):
     xml, arm_s, arm_c = arms
     family = DomainFamily.of(arm_c, fit=("viscosity_scale", "stiffness_scale"))
