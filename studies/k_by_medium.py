@@ -14,6 +14,16 @@ chain's D_c (viscosity_scale None, 20.117) was fitted to the reference rod at th
 the map is exact at r = 10 only; elsewhere it is a linear note, not a fit.
 
     python -m studies.k_by_medium --out studies/results/cpu/k_by_medium/k_by_medium
+
+``--rod-from JSON`` applies the committed rule (that run's k = c t63 over all media) to the
+reference rod instead: the rod's 63% step time in D_c and the aged arm, measured with the same
+recipe, gives the rule's k, set beside the rod's own best k on the validation program
+(`choose_stretch_k` in the rod, float64). A real arm's step time is one step test on it; the
+rule then needs no model of the arm (an arm identified from the rod's babbling picks the chain's
+k instead: `studies.identify_targets --case rod_k`).
+
+    python -m studies.k_by_medium --rod-from studies/results/cpu/k_by_medium/k_by_medium.json \
+        --out studies/results/cpu/k_by_medium/rod
 """
 
 from __future__ import annotations
@@ -202,6 +212,61 @@ def plot(rows: list[dict], path) -> None:
     plt.close(fig)
 
 
+#: Hold factors the rod check scores (each costs a rod rollout of 20 s x k on the CPU).
+ROD_CANDIDATES = (10, 15, 20, 25, 30)
+
+
+def rod_t63_s(rod, hold_s: float) -> float:
+    """`step_t63_s`'s recipe on a `mjx_arm.RodArm` (its own JAX simulator, float64)."""
+    n = int(round(hold_s * constants.CONTROL_HZ))
+    command = np.full((n, 3), rod.valve.p_min_bar)
+    command[:, 0] = STEP_PRESSURE_BAR
+    poses = rod.rollout(command)
+    deflection = np.linalg.norm(poses[:, :2] - rod.rest_pose()[:2], axis=-1)
+    return time_constant_63(np.arange(1, n + 1) / constants.CONTROL_HZ, deflection)
+
+
+def rod_check(rule_json: str, duration_s: float) -> tuple[dict, list[str]]:
+    """The committed rule k = c t63 applied to the rod in D_c and aged: (result, table lines)."""
+    import json
+
+    coef = json.loads(open(rule_json).read())["rules"]["k = c t63"]["coef"][0]
+    program = validation_program(duration_s)
+    rod_s = mjx_arm.load_rod("source")
+    rows = []
+    for name, domain in (("constrained", "constrained"), ("aged", "aged")):
+        rod = mjx_arm.load_rod(domain)
+        hold_s = STEP_HOLD_S_PER_RATIO * PAPER_DRAG_RATIO / rod.domain.stiffness_scale
+        t63 = rod_t63_s(rod, hold_s)
+        k_rule = math.exp(coef) * t63
+        k, errors = choose_stretch_k(rod_s, rod, program, ROD_CANDIDATES, "rod", False)
+        rule_k = nearest_candidate(k_rule, ROD_CANDIDATES)
+        errors = {str(c): float(e) for c, e in errors.items()}
+        rows.append(
+            {"domain": name, "t63_s": t63, "k_rule": k_rule, "k_rule_candidate": rule_k}
+            | {"k_best": k, "x_err_cm": errors}
+        )
+    lines = [
+        "",
+        f"The rule k = {math.exp(coef):.3f} t63 (`{rule_json}`, all 14 chain media) applied to"
+        f" the reference rod (float64): its 63% step time by the same recipe, the rule's k"
+        f" rounded to the nearest of {list(ROD_CANDIDATES)}, and stretch only's best k on the"
+        f" {duration_s:g} s validation program in the rod. X_err cm.",
+        "",
+        "| rod | t63 s | rule's k | rule's candidate | best k | "
+        + " | ".join(f"k={c}" for c in ROD_CANDIDATES)
+        + " |",
+        "|---|---|---|---|---|" + "---|" * len(ROD_CANDIDATES),
+    ]
+    for r in rows:
+        errs = " | ".join(f"{r['x_err_cm'][str(c)]:.3f}" for c in ROD_CANDIDATES)
+        lines.append(
+            f"| {r['domain']} | {r['t63_s']:.1f} | {r['k_rule']:.1f} | {r['k_rule_candidate']} |"
+            f" {r['k_best']} | {errs} |"
+        )
+    return {"rule_json": rule_json, "coef": coef, "rows": rows}, lines
+
+
 def main(argv=None) -> None:
     p = cli_parser("studies.k_by_medium", __doc__)
     p.add_argument("--model", default="models/softarm.xml", help="the arm's MJCF")
@@ -209,10 +274,18 @@ def main(argv=None) -> None:
         "--duration", type=float, default=20.0, help="validation program length (s), eval's 20"
     )
     p.add_argument("--out", required=True, help="output prefix (writes .json, .md and .png)")
+    p.add_argument("--rod-from", help="the rule's JSON: check it on the reference rod instead")
     a = parse_checked_args(p, argv)
     if not a.duration > 0:
         p.error(f"--duration must be positive, got {a.duration}")
     header = run_header("studies.k_by_medium", argv)
+    if a.rod_from:
+        try:
+            result, lines = rod_check(a.rod_from, a.duration)
+        except (OSError, KeyError, ValueError) as err:
+            p.error(f"--rod-from {a.rod_from}: {err!r}")
+        write_results(a.out, header, result, "The k rule on the reference rod", lines)
+        return
     t0 = time.perf_counter()
     rows = measure(a.model, MEDIA, a.duration)
     scores = held_out_scores(rows)
