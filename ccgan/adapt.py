@@ -18,7 +18,10 @@ chain's data-only stage's (`experiments/paper.json`, ident_sim: 240 programs of 
 one GPU); ``--quick`` makes a tiny translator in a few minutes on a CPU, to try the path. More
 `ccgan.distill` options follow a ``--``.
 
-    python -m ccgan.adapt --data LOGS --out DIR [--quick] [-- --epochs 200 ...]
+    python -m ccgan.adapt --data LOGS --out DIR [--t63 S] [--quick] [-- --epochs 200 ...]
+
+With ``--t63`` (the arm's 63% step time from one step test on it), k is set by the rule
+`K_PER_T63_S` x t63 instead of chosen in the identified arm.
 
     import ccgan
     translator = ccgan.load_translator("DIR/translator/translator.ckpt", method="distill",
@@ -30,6 +33,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import sys
 import time
 from pathlib import Path
@@ -45,6 +49,11 @@ START_SEEDS = (0, 1, 2)
 NOMINAL_VISCOSITY_SCALE = 10.0
 #: Hold factors the teacher's k is chosen among: D_c's (15) and the aged arm's (25) inside.
 K_CANDIDATES = (10, 15, 20, 25, 30)
+#: k per second of the arm's 63% step time (chamber 0 to 2 bar): fitted over 14 chain media and
+#: scored leaving each out (studies/results/cpu/k_by_medium/k_by_medium.md); from the reference
+#: rod's step times it gives the rod's best k in D_c and aged, where an arm identified from the
+#: rod's babbling does not (studies/results/cpu/k_by_medium/rod.md).
+K_PER_T63_S = 0.526
 #: `ccgan.distill` settings of the chain's ident_sim stage (teacher and distillation in one run).
 CHAIN_SETTINGS = (
     "--duration-s 60 --n-train 120 --n-train-full 120 --n-val 8 --n-val-full 8"
@@ -80,6 +89,14 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument("--n-programs", type=int, help="identify on the first N training programs")
     p.add_argument("--k-candidates", type=int, nargs="+", default=list(K_CANDIDATES))
+    p.add_argument(
+        "--t63",
+        type=float,
+        help="the arm's 63%% step time (s), from one step test on it (chamber 0 to 2 bar): k is"
+        f" then {K_PER_T63_S} x t63, the nearest of --k-candidates, instead of chosen in the"
+        " identified arm (which misses a real arm's k when the chain's family cannot hold it:"
+        " docs/media_range.md)",
+    )
     p.add_argument("--quick", action="store_true", help="tiny settings, to try the path on a CPU")
     return p
 
@@ -104,6 +121,12 @@ def data_domain(data: Path, asked: str | None) -> str:
     return names[0]
 
 
+def k_from_step_time(t63_s: float, candidates) -> int:
+    """The candidate nearest (in log) to `K_PER_T63_S` x the 63% step time `t63_s` (s)."""
+    k = K_PER_T63_S * t63_s
+    return min(candidates, key=lambda c: abs(math.log(c) - math.log(k)))
+
+
 def main(argv: list[str] | None = None) -> int:
     from ccgan import distill
     from mjx_arm import identify
@@ -123,6 +146,8 @@ def main(argv: list[str] | None = None) -> int:
     for path in a.translators:
         if not Path(path).is_file():
             p.error(f"--translators: {path} is not a file")
+    if a.t63 is not None and not (a.t63 > 0 and math.isfinite(a.t63)):
+        p.error(f"--t63 must be a positive number of seconds, got {a.t63}")
     check_output_dir(p, "--out", str(out))
     started = time.perf_counter()
     identify_argv = ["--data", str(data), "--out", str(out / "identify"), "--model", a.model]
@@ -138,7 +163,11 @@ def main(argv: list[str] | None = None) -> int:
     distill_argv = ["--translators", *a.translators, "--seeds", *seeds, "--model", a.model]
     distill_argv += ["--domain", IDENTIFIED, "--start-domain", "constrained"]
     distill_argv += ["--teach-domain", str(out / "identify" / "identify.json")]
-    distill_argv += ["--k-candidates", *map(str, a.k_candidates), "--out", str(out / "translator")]
+    if a.t63 is None:
+        distill_argv += ["--k-candidates", *map(str, a.k_candidates)]
+    else:
+        distill_argv += ["--hold-factor", str(k_from_step_time(a.t63, a.k_candidates))]
+    distill_argv += ["--out", str(out / "translator")]
     distill_argv += (QUICK_SETTINGS if a.quick else CHAIN_SETTINGS) + extra
     print(f"teach: python -m ccgan.distill {' '.join(distill_argv)}", flush=True)
     distill.main(distill_argv)

@@ -42,6 +42,7 @@ def test_the_logs_domain_is_the_only_one_besides_the_source(tmp_path):
             ["--data", "{tmp}/aged", "--out", "{tmp}/o", "--translators", "{tmp}/none.ckpt"],
             "is not a file",
         ),
+        (["--data", "{tmp}/aged", "--out", "{tmp}/o", "--t63", "-3"], "--t63 must be"),
     ],
 )
 def test_bad_input_is_a_usage_error_before_any_work(tmp_path, capsys, argv, message):
@@ -52,6 +53,14 @@ def test_bad_input_is_a_usage_error_before_any_work(tmp_path, capsys, argv, mess
     assert exc.value.code == 2
     assert message in capsys.readouterr().err
     assert not (tmp_path / "o").exists()
+
+
+def test_k_from_the_step_time_is_the_rules_nearest_candidate():
+    """The rod's step times (36.2 s in D_c, 50.7 s aged) give its best k, 20 and 25; the
+    chain's D_c (32.6 s) its 15."""
+    candidates = adapt.K_CANDIDATES
+    assert [adapt.k_from_step_time(t, candidates) for t in (32.6, 36.2, 50.7)] == [15, 20, 25]
+    assert adapt.k_from_step_time(36.2, (10, 15)) == 15  # only among the candidates
 
 
 def test_the_default_start_translators_are_committed_files():
