@@ -35,6 +35,7 @@ from eval.methods import (
     TranslatorMethod,
     check_translator_arms,
     load_translator,
+    taught_domains,
     translator_source,
 )
 from eval.report import markdown_report, run_mark
@@ -528,38 +529,6 @@ def _plan(cfg: EvalConfig, arm_s, arm_c, translators: dict, run: RunLog, rods=No
         rollout_backend=backend,
         tracker_arm=arm_c if rods is not None else None,
     )
-
-
-def taught_domains(translators: dict[str, TranslatorMethod], arm_s, arm_c) -> dict:
-    """{method: what its files record they were taught on, beside the truth} for the translators
-    distilled on a Domain file (`ccgan.translator.taught_domain`, e.g. ccgan_ident): {"files":
-    {file: the Domain file's sha256}, "path", "sha256", "method" and "values" of the first file's
-    record, "truth": the physical values of the target the table is scored in
-    (`mjx_arm.domains.physical_values` of `arm_c`, the chain in cfg.target_domain; `arm_s`
-    its source) and "error_pct": each identified value against it}. Empty when none was."""
-    from mjx_arm import domains
-
-    truth = domains.physical_values(arm_c.mj_model, arm_s.mj_model, arm_c.domain)
-    out = {}
-    for method, tr in translators.items():
-        records = [labels.get("taught_domain") for labels in tr.labels]
-        if not any(records):
-            continue
-        first = next(r for r in records if r)
-        values = first.get("values") or {}
-        files = zip(tr.files, records, strict=True)
-        out[method] = {
-            "files": {str(f): (r or {}).get("sha256") for f, r in files},
-            **{key: first.get(key) for key in ("path", "sha256", "method", "domain")},
-            "values": values,
-            "truth": truth,
-            "error_pct": {
-                name: 100.0 * (values[name] / truth[name] - 1.0)
-                for name in truth
-                if isinstance(values.get(name), int | float)
-            },
-        }
-    return out
 
 
 def _rod_description(plan: Plan) -> dict:

@@ -214,7 +214,7 @@ TAUGHT_FIELDS = {
 
 def taught_section(results: dict, heading: bool = True) -> list[str]:
     """The translators taught on an identified arm (shapes.json's "taught_domains", written by
-    `eval.pipeline.taught_domains`): what each was taught on, the identified values beside the
+    `eval.methods.taught_domains`): what each was taught on, the identified values beside the
     truth of the target the table was scored in, and which distilled translator is privileged;
     under its own heading unless `heading` is False (a report that has one). Empty for runs
     without one."""

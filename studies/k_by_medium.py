@@ -68,14 +68,15 @@ def viscosity_scale_of(drag_ratio: float, constrained_scale: float) -> float:
     return drag_ratio * constrained_scale / PAPER_DRAG_RATIO
 
 
-def step_t63_s(arm: mjx_arm.Arm, hold_s: float) -> float:
+def step_t63_s(arm, hold_s: float, backend: str = "c") -> float:
     """63% time (s) of the tip's xy deflection after chamber 0 is commanded to 2 bar (through
-    the valve, the others at the floor), sampled each 0.1 s control period in MuJoCo C."""
+    the valve, the others at the floor), sampled each 0.1 s control period on `backend`
+    (MuJoCo C for an `mjx_arm.Arm`; "rod" for a `mjx_arm.RodArm`, its own simulator)."""
     n = int(round(hold_s * constants.CONTROL_HZ))
     command = np.full((n, 3), arm.valve.p_min_bar)
     command[:, 0] = STEP_PRESSURE_BAR
-    poses = arm.rollout(command, backend="c")
-    rest = arm.rollout(np.full((1, 3), arm.valve.p_min_bar), backend="c")[0]
+    poses = arm.rollout(command, backend=backend)
+    rest = arm.rollout(np.full((1, 3), arm.valve.p_min_bar), backend=backend)[0]
     deflection = np.linalg.norm(poses[:, :2] - rest[:2], axis=-1)
     return time_constant_63(np.arange(1, n + 1) / constants.CONTROL_HZ, deflection)
 
@@ -216,16 +217,6 @@ def plot(rows: list[dict], path) -> None:
 ROD_CANDIDATES = (10, 15, 20, 25, 30)
 
 
-def rod_t63_s(rod, hold_s: float) -> float:
-    """`step_t63_s`'s recipe on a `mjx_arm.RodArm` (its own JAX simulator, float64)."""
-    n = int(round(hold_s * constants.CONTROL_HZ))
-    command = np.full((n, 3), rod.valve.p_min_bar)
-    command[:, 0] = STEP_PRESSURE_BAR
-    poses = rod.rollout(command)
-    deflection = np.linalg.norm(poses[:, :2] - rod.rest_pose()[:2], axis=-1)
-    return time_constant_63(np.arange(1, n + 1) / constants.CONTROL_HZ, deflection)
-
-
 def rod_check(rule_json: str, duration_s: float) -> tuple[dict, list[str]]:
     """The committed rule k = c t63 applied to the rod in D_c and aged: (result, table lines)."""
     import json
@@ -237,7 +228,7 @@ def rod_check(rule_json: str, duration_s: float) -> tuple[dict, list[str]]:
     for name, domain in (("constrained", "constrained"), ("aged", "aged")):
         rod = mjx_arm.load_rod(domain)
         hold_s = STEP_HOLD_S_PER_RATIO * PAPER_DRAG_RATIO / rod.domain.stiffness_scale
-        t63 = rod_t63_s(rod, hold_s)
+        t63 = step_t63_s(rod, hold_s, backend="rod")
         k_rule = math.exp(coef) * t63
         k, errors = choose_stretch_k(rod_s, rod, program, ROD_CANDIDATES, "rod", False)
         rule_k = nearest_candidate(k_rule, ROD_CANDIDATES)
