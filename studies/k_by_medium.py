@@ -11,7 +11,8 @@ in log k, each scored leaving one medium out of its fit: k = c t63, and k = a r^
 
 The drag ratio maps to the chain's viscosity scale as r x CONSTRAINED_VISCOSITY_SCALE / 10: the
 chain's D_c (viscosity_scale None, 20.117) was fitted to the reference rod at the paper's 10x, so
-the map is exact at r = 10 only; elsewhere it is a linear note, not a fit.
+the map is exact at r = 10 only; elsewhere it is a linear note, not a fit. That map and the step
+time are `mjx_arm.media`'s (`viscosity_scale_of`, `step_t63_s`), where `ccgan` finds them too.
 
     python -m studies.k_by_medium --out studies/results/cpu/k_by_medium/k_by_medium
 
@@ -37,15 +38,18 @@ import numpy as np
 import mjx_arm
 from bench import run_header, write_results
 from ccgan.cli import cli_parser
-from mjx_arm import constants, domains
-from mjx_arm.arm import time_constant_63
+from mjx_arm import domains
 from mjx_arm.identify_family import resolved_viscosity_scale
+from mjx_arm.media import (
+    PAPER_DRAG_RATIO,
+    STEP_HOLD_S_PER_RATIO,
+    step_t63_s,
+    viscosity_scale_of,
+)
 from mjx_arm.programs import validation_program
 from studies.checks import parse_checked_args
 from tracking.held import choose_stretch_k
 
-#: The paper's D_c drag ratio, at which the chain's constrained viscosity scale was fitted.
-PAPER_DRAG_RATIO = 10.0
 #: Media (drag ratio r, stiffness scale s): r over the issue's range at s = 1, and three r at the
 #: softer ends of the stiffness range.
 MEDIA = tuple((r, 1.0) for r in (2, 3, 5, 7, 10, 15, 20, 30)) + tuple(
@@ -57,28 +61,6 @@ CANDIDATES = (1, 5, 10, 15, 20, 25, 30, 40, 50)
 #: Tried one at a time, in order, while the best k is the largest tried (the slowest media pick
 #: 50 or more): the cost of a candidate grows with k, so the fast media do not pay for them.
 EXTENSION = (60, 70, 80, 100, 120)
-#: The step response is held this long per unit of r / s (s): 200 s at D_c, over 5 of its 63%
-#: times (35 s).
-STEP_HOLD_S_PER_RATIO = 20.0
-STEP_PRESSURE_BAR = 2.0
-
-
-def viscosity_scale_of(drag_ratio: float, constrained_scale: float) -> float:
-    """The chain's viscosity scale for drag ratio r (paper terms): r x D_c's scale / 10."""
-    return drag_ratio * constrained_scale / PAPER_DRAG_RATIO
-
-
-def step_t63_s(arm, hold_s: float, backend: str = "c") -> float:
-    """63% time (s) of the tip's xy deflection after chamber 0 is commanded to 2 bar (through
-    the valve, the others at the floor), sampled each 0.1 s control period on `backend`
-    (MuJoCo C for an `mjx_arm.Arm`; "rod" for a `mjx_arm.RodArm`, its own simulator)."""
-    n = int(round(hold_s * constants.CONTROL_HZ))
-    command = np.full((n, 3), arm.valve.p_min_bar)
-    command[:, 0] = STEP_PRESSURE_BAR
-    poses = arm.rollout(command, backend=backend)
-    rest = arm.rollout(np.full((1, 3), arm.valve.p_min_bar), backend=backend)[0]
-    deflection = np.linalg.norm(poses[:, :2] - rest[:2], axis=-1)
-    return time_constant_63(np.arange(1, n + 1) / constants.CONTROL_HZ, deflection)
 
 
 def fit_log_linear(features: np.ndarray, log_k: np.ndarray) -> np.ndarray:
