@@ -31,6 +31,7 @@ from ccgan.translator import (
     TRUST_FLAG,
     Translator,
     check_labels,
+    describe_labels,
     is_rod_trained,
     translator_from_checkpoint,
     translator_labels,
@@ -229,6 +230,14 @@ def stage_parser(
         " (e.g. the aged arm's distillation started from the D_c CCGAN-GP)",
     )
     p.add_argument(
+        "--start-rod-trained",
+        action="store_true",
+        help="the --translators were trained on the reference rod's data (mjx_arm.babble"
+        " --backend rod; their arm is the rod's, not --model's): they only start the stage, which"
+        " teaches them in --model's arm (issue 50's data-only translator for the rod starts from"
+        " the CCGAN-GP trained on the rod's babbling). Without it such files are refused",
+    )
+    p.add_argument(
         TRUST_FLAG,
         action="store_true",
         help="accept translator files that do not record their method, domains and arm (the"
@@ -320,16 +329,22 @@ def start_stage(p: argparse.ArgumentParser, a, module: str, config: dict, argv) 
         )
     except (FileNotFoundError, ValueError) as err:  # ModelValidationError is a ValueError
         p.error(f"--model {a.model}: {err}")
+    rod_start = getattr(a, "start_rod_trained", False)
     for path, (_, meta) in zip(paths, sources, strict=True):
         try:
-            check_labels(
+            labels = check_labels(
                 meta,
                 path,
                 source_domain="source",
                 target_domain=start_domain,
-                model_hash=arm_c.model_hash,
+                model_hash=None if rod_start else arm_c.model_hash,
                 trust_unlabelled=a.trust_unlabelled_translators,
             )
+            if rod_start and not is_rod_trained(labels):
+                p.error(
+                    f"--translators: {path} is a {describe_labels(labels)}, not trained on the"
+                    " reference rod's data: drop --start-rod-trained"
+                )
         except checkpoint.CheckpointError as err:
             why = (
                 "; it was trained on the reference rod's data (mjx_arm.babble --backend rod),"
@@ -350,6 +365,7 @@ def start_stage(p: argparse.ArgumentParser, a, module: str, config: dict, argv) 
         "model_hash": arm_c.model_hash,
         "domain": a.domain,
         "start_domain": start_domain,
+        "start_rod_trained": rod_start,
         "method": module.rsplit(".", 1)[-1],
         "sources": [str(x) for x in paths],
         "seeds": seeds,

@@ -230,9 +230,9 @@ def taught_section(results: dict, heading: bool = True) -> list[str]:
         lines += [
             f'{method} ("{METHOD_NAMES.get(method, method)}") was distilled on an arm'
             f" identified from the target's data{how} (`{record['path']}`, sha256"
-            f" {str(record['sha256'])[:16]}): its teacher planned, its iterate was picked and its"
-            " k was chosen in that arm, and it is scored here in the true target like every"
-            " method."
+            f" {str(record['sha256'])[:16]}): its teacher planned and its iterate was picked in"
+            " that arm, at the k it holds (chosen there, or set by its stage's --hold-factor), and"
+            " it is scored here in the true target like every method."
             + (
                 f' ccgan_sim ("{METHOD_NAMES["ccgan_sim"]}") was taught in the true target'
                 " itself: the privileged upper bound."
@@ -240,7 +240,12 @@ def taught_section(results: dict, heading: bool = True) -> list[str]:
                 else ""
             ),
             "",
-            f"| value | identified | truth ({'the chain in ' if rod else ''}{target}) | error |",
+            (
+                f"| value | identified | the chain's {target} arm (the rod holds no such value)"
+                " | difference |"
+                if rod
+                else f"| value | identified | truth ({target}) | error |"
+            ),
             "|---|---|---|---|",
         ]
         for name, what in TAUGHT_FIELDS.items():

@@ -23,6 +23,7 @@ from experiments.stages import Chain, digest, shown_command
 TABLE_STAGE, AGED_TABLE_STAGE = "table", "table_aged"
 #: The table of the translator distilled on the identified arm beside the privileged one.
 IDENT_TABLE_STAGE = "table_ident"
+ROD_IDENT_TABLE_STAGE = "rod_table_ident"
 #: The same tables scored in the reference rod (`eval.shapes --simulator rod`).
 ROD_TABLE_STAGE, ROD_AGED_TABLE_STAGE = "rod_table", "rod_table_aged"
 #: Column names of the rod's tables: which arm each method learnt or planned on.
@@ -31,6 +32,7 @@ ROD_NAMES = {
     "wcgan": "WCGAN-GP (rod's data)",
     "ccgan_sim": "distilled (chain's)",
     "mpc": "tracker (planned in the chain)",
+    "ccgan_ident": "distilled (rod's data, identified arm)",
 }
 #: Above this ratio of rod to chain X_err the docs must say why a translator lost it (issue text).
 ROD_LOSS_FLAG = 1.5
@@ -353,31 +355,44 @@ def rod_lines(rod: dict, chain_results: dict | None, rod_aged: dict | None = Non
     return lines
 
 
-def ident_lines(results: dict) -> list[str]:
+def ident_lines(results: dict, intro: str | None = None, names: dict | None = None) -> list[str]:
     """The table of the translator distilled on the identified arm (ccgan_ident) beside the one
-    taught in the true target (ccgan_sim, the privileged upper bound), its ratios to that one and
-    to stretch only, and the identified values beside the truth (`eval.report.taught_section`)."""
+    taught in the true target (ccgan_sim, the privileged upper bound), its ratios to that one, to
+    stretch only and to CCGAN-GP where they ran, and the identified values beside the truth
+    (`eval.report.taught_section`). `intro` replaces the opening sentence, `names` the methods'
+    names (the rod's tables)."""
     table, methods = results["table"], results["methods_run"]
+    headers = dict(README_METHODS) | (names or {})
     lines = [
-        "The distilled translator taught on the arm identified from the D_c babbling alone"
+        intro
+        or "The distilled translator taught on the arm identified from the D_c babbling alone"
         " (its teacher, iterate and k all in that arm), scored in the true D_c simulator beside"
         " the one taught in the true D_c arm. X_err (cm) / phi_err (rad), then % of the shape's"
         " excursion:",
         "",
-        *readme_tables(results),
+        *readme_tables(results, names),
         "",
     ]
     if "ccgan_ident" in methods:
-        for base in (b for b in ("ccgan_sim", "stretch") if b in methods):
+        for base in (b for b in ("ccgan_sim", "stretch", "ccgan") if b in methods):
             ratios = [
                 rows["ccgan_ident"]["x_err_cm_mean"] / rows[base]["x_err_cm_mean"]
                 for rows in table.values()
             ]
             lines.append(
-                f"- {METHOD_NAMES['ccgan_ident']} / {METHOD_NAMES[base]}:"
-                f" {min(ratios):.2f}-{max(ratios):.2f}"
+                f"- {headers['ccgan_ident']} / {headers[base]}: {min(ratios):.2f}-{max(ratios):.2f}"
             )
     return lines + taught_section(results, heading=False)
+
+
+#: The opening sentence of the rod's data-only table (`ROD_IDENT_TABLE_STAGE`).
+ROD_IDENT_INTRO = (
+    "The distilled translator built from the rod's data alone (the rod-trained CCGAN-GP, taught"
+    " in the arm identified from the rod's D_c babbling, at k from the rod's step time), scored"
+    " in the reference rod beside the translator taught in the chain's true D_c arm (privileged"
+    " information, and the chain's model error), CCGAN-GP trained on the rod's data and stretch"
+    " only at the rod's k. X_err (cm) / phi_err (rad), then % of the shape's excursion:"
+)
 
 
 def write(chain: Chain, config: dict, config_path: Path) -> Path:
@@ -401,13 +416,17 @@ def write(chain: Chain, config: dict, config_path: Path) -> Path:
         lines += ["", f"Full tables: `{TABLE_STAGE}/shapes.md`"]
         if aged is not None:
             lines[-1] += f", the aged arm's `{AGED_TABLE_STAGE}/shapes.md`."
-    ident = _shapes(chain, IDENT_TABLE_STAGE)
+    ident, rod_ident = _shapes(chain, IDENT_TABLE_STAGE), _shapes(chain, ROD_IDENT_TABLE_STAGE)
+    taught = []
     if ident is not None:
-        # Paths as the commands above name them: DIR for the run folder, wherever it ran.
-        taught = ["", "## Taught on the identified arm (data-only)", "", *ident_lines(ident)]
-        for folder in {str(chain.out.resolve()), str(chain.out.absolute())}:
-            taught = [line.replace(folder, "DIR") for line in taught]
-        lines += taught
+        taught += ["", "## Taught on the identified arm (data-only)", "", *ident_lines(ident)]
+    if rod_ident is not None:
+        heading = "## Taught on the arm identified from the rod's data (data-only, in the rod)"
+        taught += ["", heading, "", *ident_lines(rod_ident, ROD_IDENT_INTRO, ROD_NAMES)]
+    # Paths as the commands above name them: DIR for the run folder, wherever it ran.
+    for folder in {str(chain.out.resolve()), str(chain.out.absolute())}:
+        taught = [line.replace(folder, "DIR") for line in taught]
+    lines += taught
     rod, rod_aged = _shapes(chain, ROD_TABLE_STAGE), _shapes(chain, ROD_AGED_TABLE_STAGE)
     if rod is not None:
         lines += ["", "## In the reference rod (the paper's simulator)", ""]

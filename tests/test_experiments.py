@@ -291,11 +291,12 @@ def test_committed_configs_parse_with_their_commands_options(config, tmp_path):
     an hour into a GPU run), and every named file exists."""
     _, stages = load_config(paper.REPO / "experiments" / config)
     chain = Chain(stages, tmp_path, paper.REPO)
-    assert [s.name for s in stages][-4:] == [
+    assert [s.name for s in stages][-5:] == [
         report.TABLE_STAGE,
         report.AGED_TABLE_STAGE,
         report.ROD_TABLE_STAGE,
         report.ROD_AGED_TABLE_STAGE,
+        report.ROD_IDENT_TABLE_STAGE,
     ]
     for stage in stages:
         for rel in stage.files():
