@@ -39,6 +39,7 @@ import time
 from pathlib import Path
 
 from ccgan.cli import check_output_dir, cli_parser
+from ccgan.media_range import K_PER_T63_S, k_from_step_time  # the k rule's home
 from mjx_arm import constants
 from mjx_arm.domains import IDENTIFIED
 
@@ -49,11 +50,6 @@ START_SEEDS = (0, 1, 2)
 NOMINAL_VISCOSITY_SCALE = 10.0
 #: Hold factors the teacher's k is chosen among: D_c's (15) and the aged arm's (25) inside.
 K_CANDIDATES = (10, 15, 20, 25, 30)
-#: k per second of the arm's 63% step time (chamber 0 to 2 bar): fitted over 14 chain media and
-#: scored leaving each out (studies/results/cpu/k_by_medium/k_by_medium.md); from the reference
-#: rod's step times it gives the rod's best k in D_c and aged, where an arm identified from the
-#: rod's babbling does not (studies/results/cpu/k_by_medium/rod.md).
-K_PER_T63_S = 0.526
 #: `ccgan.distill` settings of the chain's ident_sim stage (teacher and distillation in one run).
 CHAIN_SETTINGS = (
     "--duration-s 60 --n-train 120 --n-train-full 120 --n-val 8 --n-val-full 8"
@@ -119,12 +115,6 @@ def data_domain(data: Path, asked: str | None) -> str:
             else f"{data} holds no <domain>_train.npz besides source_train.npz"
         )
     return names[0]
-
-
-def k_from_step_time(t63_s: float, candidates) -> int:
-    """The candidate nearest (in log) to `K_PER_T63_S` x the 63% step time `t63_s` (s)."""
-    k = K_PER_T63_S * t63_s
-    return min(candidates, key=lambda c: abs(math.log(c) - math.log(k)))
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -400,6 +400,12 @@ class Generator(nn.Module):
         sigmoid(logit(p_in) + d), the pose part x_in + d, with the last layer zero at
         initialisation. D_s and D_c share their statics, so at long holds the right translation
         is near the identity; a plain G must first learn it.
+
+    Conditioned (`n_condition` > 0, issue 51): the target medium's condition features
+    (`ccgan.media_range.MediaRange.condition`, C = 2) follow the sample at every step, x
+    [B, T, 9 + C], and enter the first LSTM layer with it; nothing else changes, so
+    `with_condition_inputs` can start a conditioned G from a trained one. With 0 (every file
+    written before) the layers, parameters and numerics are the unconditioned G's.
     """
 
     hidden: int = 32
@@ -410,10 +416,18 @@ class Generator(nn.Module):
     unroll: int = 1
     per_sample: bool = False
     residual: bool = False
+    #: Condition features appended to each sample (0: an unconditioned G).
+    n_condition: int = 0
 
     @nn.compact
     def __call__(self, x):
-        """x: [B, T, 9] normalised samples -> [B, T, 9] (pressure in [0, 1], then pose)."""
+        """x: [B, T, 9 + n_condition] normalised samples (then the condition) -> [B, T, 9]
+        (pressure in [0, 1], then pose)."""
+        if x.shape[-1] != PRESSURE_DIM + POSE_DIM + self.n_condition:
+            raise ValueError(
+                f"G takes samples of {PRESSURE_DIM + POSE_DIM} features plus its"
+                f" {self.n_condition} condition features, got {x.shape[-1]}"
+            )
         h = x.reshape(-1, 1, x.shape[-1]) if self.per_sample else x
         for i in range(self.n_layers):
             h = nn.RNN(nn.OptimizedLSTMCell(self.hidden), unroll=self.unroll, name=f"lstm_{i}")(h)
@@ -424,8 +438,46 @@ class Generator(nn.Module):
         if self.residual:
             p_in = jnp.clip(x[..., :PRESSURE_DIM], 1e-3, 1 - 1e-3)
             pressure = nn.sigmoid(jnp.log(p_in) - jnp.log1p(-p_in) + out[..., :PRESSURE_DIM])
-            return jnp.concatenate([pressure, x[..., PRESSURE_DIM:] + out[..., PRESSURE_DIM:]], -1)
+            pose_in = x[..., PRESSURE_DIM : PRESSURE_DIM + POSE_DIM]
+            return jnp.concatenate([pressure, pose_in + out[..., PRESSURE_DIM:]], -1)
         return jnp.concatenate([nn.sigmoid(out[..., :PRESSURE_DIM]), out[..., PRESSURE_DIM:]], -1)
+
+
+def with_condition_inputs(generator: Generator, g_params, n_condition: int):
+    """A conditioned G started from a trained unconditioned one: (the generator with
+    `n_condition` condition inputs, its parameters).
+
+    The first LSTM layer's input kernels [9, H] gain `n_condition` zero rows [9 + C, H]; every
+    other parameter is copied. The new G then gives the old one's output whatever the
+    condition (to float rounding: the kernels' products have C more terms, each zero), and
+    training moves the new rows from there.
+
+    Args:
+      generator: the trained G (`n_condition` 0).
+      g_params: its variables ({"params": ...}).
+      n_condition: C >= 1.
+
+    Raises:
+      ValueError: `generator` is conditioned already, or C < 1.
+    """
+    if generator.n_condition or n_condition < 1:
+        raise ValueError(
+            f"need an unconditioned G and n_condition >= 1, got {generator.n_condition} and"
+            f" {n_condition}"
+        )
+    wide = generator.clone(n_condition=n_condition)
+    sample = jnp.zeros((1, 1, PRESSURE_DIM + POSE_DIM + n_condition))
+    template = jax.eval_shape(wide.init, jax.random.PRNGKey(0), sample)
+
+    def widen(want, have):
+        have = jnp.asarray(have)
+        if want.shape == have.shape:
+            return have
+        if want.shape[1:] == have.shape[1:] and want.shape[0] == have.shape[0] + n_condition:
+            return jnp.concatenate([have, jnp.zeros((n_condition,) + have.shape[1:], have.dtype)])
+        raise ValueError(f"a parameter of shape {have.shape} cannot become {want.shape}")
+
+    return wide, jax.tree.map(widen, template, g_params)
 
 
 class TimeConv(nn.Module):

@@ -1,4 +1,10 @@
-"""A trained G_c packaged for use: D_s pressure programs in, D_c pressure programs out."""
+"""A trained G_c packaged for use: D_s pressure programs in, D_c pressure programs out.
+
+A translator is for one pair of media (D_s to D_c, or to the aged arm) at one hold factor k, or,
+conditioned (issue 51, `ccgan.distill_range`), for a range of media: `translate(p, x,
+target=Domain(...))` then gives the target's commands and the k the rule picks for it
+(`ccgan.media_range`).
+"""
 
 from __future__ import annotations
 
@@ -21,6 +27,7 @@ from ccgan.data import (
     normalise_pressure,
     samples,
 )
+from ccgan.media_range import MEDIA_RANGE, N_CONDITION, MediaRange
 from ccgan.models import ForwardModel, Generator, forward_open_loop
 
 _RESULTS = Path(__file__).resolve().parent.parent / "results"
@@ -55,7 +62,17 @@ MAX_COMMAND_BAR = 10.0
 #: (the retired `ccgan.finetune`, whose files `eval` refuses; `ccgan.distill`: "distill" when
 #: it started from a CCGAN-GP translator, "distill_from_<method>" from another, whose file then
 #: records "started_from").
-METHODS = ("ccgan", "wcgan", "finetune", "distill", "distill_from_wcgan", "distill_from_finetune")
+#: `ccgan.distill_range`: a conditioned translator over a range of media, its target domain
+#: label `ccgan.media_range.MEDIA_RANGE`.
+METHODS = (
+    "ccgan",
+    "wcgan",
+    "finetune",
+    "distill",
+    "distill_from_wcgan",
+    "distill_from_finetune",
+    "distill_range",
+)
 #: What a translator file says it is, each a metadata key: its method, the domains it translates
 #: from and into (mjx_arm.DOMAINS names: "source" -> "constrained" or "aged") and the
 #: `mjx_arm.Arm.model_hash` of the arm it was trained (or last refined) on; a translator
@@ -273,7 +290,12 @@ def save_translator(
 
 @dataclasses.dataclass
 class Translator:
-    """G_c with its hold factor k and the normalisation it was trained with."""
+    """G_c with its hold factor k and the normalisation it was trained with.
+
+    A conditioned translator (`media` set, `generator.n_condition` = 2) covers a range of media
+    and needs a target: its k is the target's (`hold_factor`), and `k` is only the k of the
+    translator it was started from (D_c's), kept for the file's format.
+    """
 
     g_c_params: dict
     k: int
@@ -281,6 +303,42 @@ class Translator:
     generator: Generator
     f_c_params: dict | None = None
     forward_model: ForwardModel | None = None
+    media: MediaRange | None = None
+
+    @property
+    def conditioned(self) -> bool:
+        """Whether this translator takes a target medium (`translate(..., target=...)`)."""
+        return self.media is not None
+
+    def target_condition(self, target, t63_s: float | None = None) -> tuple[np.ndarray, int]:
+        """(G_c's condition features [2], k) for a target of a conditioned translator.
+
+        Args:
+          target: an `mjx_arm.Domain` or (drag ratio r, stiffness scale s) inside the range
+            (`ccgan.media_range.MediaRange.drag_and_stiffness`).
+          t63_s: the target's measured 63% step time (s; one step test on the arm), which sets
+            k by the rule; None: the step time the file's fit gives for (r, s).
+
+        Raises:
+          TypeError: this translator is for one pair of media (it takes no target), or the
+            target is neither a Domain nor a pair (r, s), or none was given.
+          ValueError: the target is outside the trained range, or a Domain the range cannot
+            read, or t63_s is not a step time.
+        """
+        if self.media is None:
+            raise TypeError(
+                f"this translator is for one pair of media at k = {self.k}: it takes no"
+                " target (pass target only to a conditioned translator, ccgan.distill_range)"
+            )
+        if target is None:
+            r_range, s_range = self.media.drag_ratio_range, self.media.stiffness_range
+            raise TypeError(
+                "this translator is conditioned on the target medium: pass"
+                " target=mjx_arm.Domain(...) or target=(drag ratio r, stiffness scale s), r in"
+                f" {r_range}, s in {s_range}"
+            )
+        r, s = self.media.drag_and_stiffness(target)
+        return self.media.condition(r, s), self.media.hold_factor(r, s, t63_s)
 
     @functools.cached_property
     def _generator_jit(self):
@@ -289,25 +347,38 @@ class Translator:
         (`bench/results/cpu/main_job_fresh_clone.md`)."""
         return jax.jit(self.generator.apply)
 
-    def translate(self, pressures_s, poses_s) -> tuple[np.ndarray, int]:
-        """Translates a D_s program into D_c.
+    def translate(
+        self, pressures_s, poses_s, target=None, *, t63_s: float | None = None
+    ) -> tuple[np.ndarray, int]:
+        """Translates a D_s program into D_c (or, conditioned, into the target medium).
 
         Args:
           pressures_s: [T, 3] D_s commands (bar, 10 Hz).
           poses_s: [T, 6] the D_s poses they produce (tip position m, unit d3).
+          target: a conditioned translator's target medium, an `mjx_arm.Domain` or (drag ratio
+            r, stiffness scale s) inside its range; None for a translator of one pair.
+          t63_s: a conditioned translator's target's measured 63% step time (s), which sets k
+            (`target_condition`); None: the file's fit of it.
 
         Returns:
           (pressures_c [T * k, 3] bar: each translated command held k control periods, k).
 
         Raises:
-          TypeError: boolean pressures or poses (`check_program`).
-          ValueError: the program fails `check_program` (shapes, NaN/inf, units).
+          TypeError: boolean pressures or poses (`check_program`); a target given to a
+            translator of one pair, or none to a conditioned one (`target_condition`).
+          ValueError: the program fails `check_program` (shapes, NaN/inf, units); the target
+            is outside the trained range (`target_condition`).
         """
+        condition, k = (None, self.k)
+        if self.conditioned or target is not None or t63_s is not None:
+            condition, k = self.target_condition(target, t63_s)
         p, x = check_program(pressures_s, poses_s)
-        s = samples(p, x, self.bounds)[None]
-        out = np.asarray(self._generator_jit(self.g_c_params, jnp.asarray(s)))[0]
+        s = samples(p, x, self.bounds)
+        if condition is not None:
+            s = with_condition(s, condition)
+        out = np.asarray(self._generator_jit(self.g_c_params, jnp.asarray(s[None])))[0]
         commands = denormalise_pressure(out[:, :PRESSURE_DIM]).astype(np.float64)
-        return np.repeat(commands, self.k, axis=0), self.k
+        return np.repeat(commands, k, axis=0), k
 
     def predict_poses(self, pressures_c, pose0) -> np.ndarray:
         """F_c's open-loop poses [T', 6] (m, unit d3) for D_c commands [T', 3] (bar) from pose0 [6].
@@ -336,6 +407,15 @@ class Translator:
         x0 = jnp.asarray(normalise_pose(x0, self.bounds))[None]
         pred = forward_open_loop(self.forward_model, self.f_c_params, p, x0)
         return denormalise_pose(np.asarray(pred[0], np.float64), self.bounds)
+
+
+def with_condition(samples_s: np.ndarray, condition) -> np.ndarray:
+    """Samples [..., T, 9] with the condition [..., C] (one per program, or [C] for all)
+    appended at every step: [..., T, 9 + C] float32, a conditioned G_c's input."""
+    samples_s = np.asarray(samples_s, np.float32)
+    condition = np.asarray(condition, np.float32)
+    steps = np.broadcast_to(condition[..., None, :], samples_s.shape[:-1] + (condition.shape[-1],))
+    return np.concatenate([samples_s, steps], -1)
 
 
 def translator_path(path: str | os.PathLike | None = None) -> Path:
@@ -407,13 +487,23 @@ def translator_from_checkpoint(source: tuple[dict, dict], path="checkpoint") -> 
     if not isinstance(k, int) or isinstance(k, bool) or k < 1:
         raise checkpoint.CheckpointError(f"{path}: hold factor k must be an int >= 1, got {k!r}")
     try:
-        return Translator(
+        generator = Generator(**meta["generator"])
+        media = MediaRange.from_dict(meta[MEDIA_RANGE]) if MEDIA_RANGE in meta else None
+        translator = Translator(
             g_c_params=tree["g_c"],
             k=k,
             bounds=PoseBounds.from_dict(meta["bounds"]),
-            generator=Generator(**meta["generator"]),
+            generator=generator,
             f_c_params=tree.get("f_c"),
             forward_model=ForwardModel(**meta["forward"]),
+            media=media,
         )
-    except (KeyError, TypeError) as err:
+    except (KeyError, TypeError, ValueError) as err:
         raise checkpoint.CheckpointError(f"{path}: incomplete translator file ({err!r})") from err
+    if generator.n_condition != (N_CONDITION if media is not None else 0):
+        raise checkpoint.CheckpointError(
+            f"{path}: its G_c takes {generator.n_condition} condition features, and the file"
+            f" {'records' if media is not None else 'records no'} range of media"
+            f" ({MEDIA_RANGE!r} metadata): a conditioned G_c needs both, {N_CONDITION} features"
+        )
+    return translator

@@ -92,7 +92,9 @@ def init_imitation(translators: list[Translator], config: DistillConfig, data: I
 
     `step(params, opt_state, s_batch [B, T, 9], c_batch [B, T, 3]) -> (params, opt_state,
     loss [S])`: every seed's step on one batch; the loss is the `head_weights`-weighted mean
-    squared difference of G_c's normalised pressures from the teacher's.
+    squared difference of G_c's normalised pressures from the teacher's. A conditioned G_c's
+    samples carry its condition, [B, T, 9 + C] (`ccgan.distill_range`). The step size's
+    schedule spans `config.epochs` passes over data's N training programs.
     """
     import jax
     import jax.numpy as jnp
@@ -105,7 +107,7 @@ def init_imitation(translators: list[Translator], config: DistillConfig, data: I
         out = tr.generator.apply(g_params, s_batch)[..., :PRESSURE_DIM]
         return jnp.mean(step_weight * (out - c_batch) ** 2)
 
-    n_train = config.n_train_programs
+    n_train = data.s_train.shape[0]  # config.n_train_programs here; more over media
     total_steps = config.epochs * (n_train // config.batch_size)
     rate = optax.cosine_decay_schedule(config.learning_rate, total_steps, config.final_lr_factor)
     opt = optax.adam(rate if config.final_lr_factor != 1.0 else config.learning_rate)
