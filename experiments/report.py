@@ -8,6 +8,11 @@ outside a chain, e.g. with the committed chain's translators):
 
     python -m experiments.report --rod-table DIR --rod-aged-table DIR \
         --chain-table results/paper/rerun_2026-11-27/run/table --out rod.md
+
+A chain's paper.md from the stages finished so far (`experiments.paper` writes it only once
+every stage is done; this names the unfinished ones and leaves their tables out):
+
+    python -m experiments.report --run DIR --config experiments/paper.json --out paper.md
 """
 
 from __future__ import annotations
@@ -50,15 +55,36 @@ def _hms(seconds: float) -> str:
     return f"{minutes // 60} h {minutes % 60:02d} min {s:02d} s"
 
 
+def attempts_of(chain: Chain, name: str) -> tuple[list[dict], bool]:
+    """(a stage's attempts so far, whether it finished): from its stage.json when it finished,
+    else from NAME.attempts.json beside its partial folder ([] when it never started)."""
+    manifest = chain.manifest(name)
+    if manifest is not None:
+        return manifest["attempts"], True
+    path = chain.attempts_path(name)
+    return (json.loads(path.read_text())["attempts"] if path.exists() else []), False
+
+
 def stage_lines(chain: Chain) -> list[str]:
-    """The stages: what each made, where it ran, its wall time over its attempts, its command."""
+    """The stages: what each made, where it ran, its wall time over its attempts, its command.
+    A stage that has not finished is named so, with its time so far."""
     lines = [
         "| stage | what | wall time | attempts | stages at once | machine |",
         "|---|---|---|---|---|---|",
     ]
     total = 0.0
-    for name in chain.stages:
+    for name, stage in chain.stages.items():
         m = chain.manifest(name)
+        if m is None:
+            attempts, _ = attempts_of(chain, name)
+            spent = sum(a["wall_s"] or 0.0 for a in attempts)  # None: the attempt running
+            total += spent
+            machines = sorted({a.get("machine", "?") for a in attempts}) or ["-"]
+            lines.append(
+                f"| {name} | {stage.about} | not finished ({_hms(spent)} so far)"
+                f" | {len(attempts)} | - | {'; '.join(machines)} |"
+            )
+            continue
         total += m["wall_s"]
         lines.append(
             f"| {name} | {m['about']} | {_hms(m['wall_s'])} | {len(m['attempts'])}"
@@ -77,6 +103,38 @@ def stage_lines(chain: Chain) -> list[str]:
     # From the config, not the manifests: every command then names the same run folder.
     as_run_by_hand = Chain(list(chain.stages.values()), Path("DIR"), chain.repo)
     lines += [f"- `{shown_command(as_run_by_hand, n)}`" for n in chain.stages]
+    return lines
+
+
+def timeline_lines(chain: Chain) -> list[str]:
+    """Each stage's attempts in time: start (s after the chain's first start), wall time (s)
+    and the GPU it was given; finished or not. Between calls to a lent machine the clock runs on,
+    so the gaps include the packing, the return and the next call's start."""
+    from datetime import datetime
+
+    rows, starts = [], []
+    for name in chain.stages:
+        attempts, finished = attempts_of(chain, name)
+        for a in attempts:
+            start = datetime.fromisoformat(a["started"])
+            starts.append(start)
+            rows.append((start, name, a, finished))
+    if not rows:
+        return ["No stage has started."]
+    first = min(starts)
+    lines = [
+        "| stage | attempt | start s | end s | wall s | GPU | finished |",
+        "|---|---|---|---|---|---|---|",
+    ]
+    count: dict[str, int] = {}
+    for start, name, a, finished in sorted(rows, key=lambda r: (r[0], r[1])):
+        count[name] = count.get(name, 0) + 1
+        at, wall = (start - first).total_seconds(), a["wall_s"]
+        end, wall = ("running", "-") if wall is None else (f"{at + wall:.0f}", f"{wall:.0f}")
+        lines.append(
+            f"| {name} | {count[name]} | {at:.0f} | {end} | {wall}"
+            f" | {a.get('device', '-')} | {'yes' if finished else 'not yet'} |"
+        )
     return lines
 
 
@@ -395,8 +453,8 @@ ROD_IDENT_INTRO = (
 )
 
 
-def write(chain: Chain, config: dict, config_path: Path) -> Path:
-    """Writes chain.out/paper.md from the finished stages; returns its path."""
+def write(chain: Chain, config: dict, config_path: Path, out: Path | None = None) -> Path:
+    """Writes `out` (default chain.out/paper.md) from the finished stages; returns its path."""
     results = _shapes(chain, TABLE_STAGE)
     aged = _shapes(chain, AGED_TABLE_STAGE)
     lines = [
@@ -409,7 +467,17 @@ def write(chain: Chain, config: dict, config_path: Path) -> Path:
         "## Stages",
         "",
         *stage_lines(chain),
+        "",
+        "## Timeline",
+        "",
+        *timeline_lines(chain),
     ]
+    unfinished = [n for n in chain.stages if chain.manifest(n) is None]
+    if unfinished:
+        lines[4:4] = [
+            f"**Not finished:** {', '.join(unfinished)}: their tables are not below.",
+            "",
+        ]
     if results is not None:
         lines += ["", "## Beside the paper", "", *paper_lines(results)]
         lines += ["", "## Targets (true D_c simulator)", "", *target_lines(results, aged)]
@@ -431,7 +499,7 @@ def write(chain: Chain, config: dict, config_path: Path) -> Path:
     if rod is not None:
         lines += ["", "## In the reference rod (the paper's simulator)", ""]
         lines += rod_section(rod, results, rod_aged)
-    path = chain.out / "paper.md"
+    path = out or chain.out / "paper.md"
     path.write_text("\n".join(lines) + "\n")
     return path
 
@@ -467,11 +535,21 @@ def main(argv: list[str] | None = None) -> int:
         prog="python -m experiments.report",
         description="the rod's tables, targets and chain-to-rod costs, from eval.shapes folders",
     )
-    parser.add_argument("--rod-table", required=True, type=Path, help="eval.shapes --simulator rod")
+    parser.add_argument(
+        "--run", type=Path, help="a chain's run folder: its paper.md from the finished stages"
+    )
+    parser.add_argument(
+        "--config", type=Path, default=Path("experiments/paper.json"), help="--run's config"
+    )
+    parser.add_argument("--rod-table", type=Path, help="eval.shapes --simulator rod")
     parser.add_argument("--rod-aged-table", type=Path, help="the same with --target-domain aged")
     parser.add_argument("--chain-table", type=Path, help="the same shapes scored in the chain")
     parser.add_argument("--out", required=True, type=Path, help="the markdown file to write")
     args = parser.parse_args(argv)
+    if args.run is not None:
+        return _write_run(parser, args)
+    if args.rod_table is None:
+        parser.error("give --rod-table (the rod's section) or --run (a chain's paper.md)")
     loaded = {}
     for flag in ("rod_table", "rod_aged_table", "chain_table"):
         folder = getattr(args, flag)
@@ -491,6 +569,22 @@ def main(argv: list[str] | None = None) -> int:
     args.out.parent.mkdir(parents=True, exist_ok=True)
     args.out.write_text(text + "\n")
     print(f"wrote {args.out}")
+    return 0
+
+
+def _write_run(parser: argparse.ArgumentParser, args) -> int:
+    """paper.md of the run folder `args.run` from its finished stages, written to `args.out`."""
+    from experiments.stages import StageError, load_config
+
+    if not args.run.is_dir():
+        parser.error(f"--run {args.run}: not a folder")
+    try:
+        config, stages = load_config(args.config)
+    except (OSError, StageError) as err:
+        parser.error(f"--config {args.config}: {err}")
+    chain = Chain(stages, args.run, Path(__file__).resolve().parents[1])
+    args.out.parent.mkdir(parents=True, exist_ok=True)
+    print(f"wrote {write(chain, config, args.config, args.out)}")
     return 0
 
 

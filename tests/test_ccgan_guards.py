@@ -322,6 +322,26 @@ def test_stages_simulate_the_arm_named_by_model(tmp_path, small_arm, shipped, ca
     err = usage_error(distill.main, [*argv, "--start-domain", "constrained"], capsys)
     assert "'aged'" in err and "--start-domain constrained" in err
 
+    # A translator trained on the reference rod's data starts a stage only with
+    # --start-rod-trained (issue 50's data-only translator for the rod), and that flag refuses a
+    # file trained on any other arm.
+    rod_hash = "rod-" + "e" * 16
+    rod = checkpoint.save(
+        tmp_path / "rod.ckpt", tree, meta | labelled("ccgan", "constrained", rod_hash)
+    )
+    argv = ["--translators", str(rod), "--out", str(tmp_path / "o3"), "--model", model]
+    err = usage_error(distill.main, argv, capsys)
+    assert "reference rod's data" in err and rod_hash in err
+    a = p.parse_args([*argv, "--start-rod-trained"])
+    stage = distill.start_stage(p, a, "ccgan.distill", {}, [])
+    assert stage.run["start_rod_trained"] and stage.run["model_hash"] == model_hash
+    chain_file = checkpoint.save(
+        tmp_path / "chain.ckpt", tree, meta | labelled("ccgan", "constrained", model_hash)
+    )
+    argv = ["--translators", str(chain_file), "--out", str(tmp_path / "o4"), "--model", model]
+    err = usage_error(distill.main, [*argv, "--start-rod-trained"], capsys)
+    assert "not trained on the reference rod's data" in err and not (tmp_path / "o4").exists()
+
 
 def labelled(method, target_domain, model_hash) -> dict:
     """A translator file's labels (`ccgan.translator.LABELS`)."""

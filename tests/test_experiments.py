@@ -755,3 +755,27 @@ def test_stages_on_an_accelerator_get_a_cpu_device_per_core_for_the_rod(monkeypa
     monkeypatch.setattr(stages_lib, "jax_device", lambda: "gpu (NVIDIA H200)")
     monkeypatch.setenv("XLA_FLAGS", "--xla_force_host_platform_device_count=8")
     assert stages_lib._child_env(1)["XLA_FLAGS"] == "--xla_force_host_platform_device_count=8"
+
+
+def test_report_of_an_unfinished_run_names_what_is_left_and_times_every_attempt(fake, capsys):
+    """`python -m experiments.report --run DIR` writes paper.md from the stages finished so far:
+    it names the unfinished ones (with their time so far) and lists every attempt in time."""
+    argv, chain = paper_like(fake)
+    assert paper.main([*argv, "--stage", "data", "forward"]) == 0
+    assert not (chain.out / "paper.md").exists()  # experiments.paper waits for every stage
+    out = chain.out.parent / "partial.md"
+    config = argv[argv.index("--config") + 1]
+    assert report.main(["--run", str(chain.out), "--config", config, "--out", str(out)]) == 0
+    text = out.read_text()
+    assert "**Not finished:** ccgan, wcgan, table" in text
+    assert "| table | " in text and "not finished (0 h 00 min 00 s so far)" in text
+    timeline = text.split("## Timeline")[1]
+    assert [line.split(" | ")[0] for line in timeline.splitlines() if line.startswith("| d")] == [
+        "| data"
+    ]
+    assert "| forward | 1 | " in timeline and "| yes |" in timeline
+    assert not (chain.out / "paper.md").exists()  # written to --out only
+    capsys.readouterr()
+    with pytest.raises(SystemExit):
+        report.main(["--run", str(chain.out / "nowhere"), "--out", str(out)])
+    assert "not a folder" in capsys.readouterr().err
