@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import threading
 
 import jax
 import jax.numpy as jnp
@@ -334,6 +335,28 @@ def test_the_quick_run_end_to_end(tmp_path, monkeypatch, capsys):
     a, k_a = translator.translate(p, x, target=(2.0, 1.0))
     b, k_b = translator.translate(p, x, target=(2.0, 0.8))
     assert k_a == k_b == 5 and np.abs(a - b).max() > 1e-4  # trained condition rows
+    # A stopped training goes on from its next epoch, on the cached teacher (no planning).
+    calls.clear()
+    _, a, range_config, config = cli.parse(["--out", str(out), "--quick", "--epochs", "4"])
+    arm_s, arm_c = (mjx_arm.load(domain=d) for d in ("source", "constrained"))
+    _, start = cli.start_translators(None, a, arm_c.model_hash)
+    training_media, rule = distill_range.plan_media(range_config, arm_c, log=lambda *_: None)
+    state = out / "training_state.npz"
+    stop = threading.Event()
+    _, stopped = distill_range.distill_range(
+        start, arm_s, arm_c, training_media, rule, config, cache=out / "teacher.npz",
+        progress=False, on_validation=lambda *_: stop.set(), stop=stop, resume=state,
+    )  # fmt: skip
+    # Set during epoch 1's validation, as a SIGTERM would be: seen after epoch 2.
+    assert not stopped["complete"] and len(stopped["train_loss"]) == 2 and state.exists()
+    logs = []
+    _, resumed = distill_range.distill_range(
+        start, arm_s, arm_c, training_media, rule, config, cache=out / "teacher.npz",
+        progress=False, log=logs.append, resume=state,
+    )  # fmt: skip
+    assert any("resuming" in line and "2 of 4 epochs" in line for line in logs)
+    assert resumed["complete"] and len(resumed["train_loss"]) == 4 and not state.exists()
+    assert resumed["train_loss"][:2] == stopped["train_loss"] and not calls
     scored = tmp_path / "score" / "media"
     seeds = [str(out / f"translator_seed{s}.ckpt") for s in (0, 1, 2)]
     scoring.main(["--translators", *seeds, "--out", str(scored), "--n-programs", "1",

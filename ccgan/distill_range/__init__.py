@@ -21,8 +21,10 @@ teaches one G_c for every medium of drag ratio r in [2, 30] and stiffness scale 
 Writes DIR/translator_seed<s>.ckpt (translator.ckpt: the first), labelled method
 "distill_range", target domain "media_range", recording the range, the training and held-out
 media and the fitted step-time model, and DIR/distill_range.json (the run and its history); the
-teacher's commands are cached in DIR/teacher.npz. A stopped run (SIGTERM, --max-wall-s) exits
-143 with its progress kept: rerun the same command to go on.
+teacher's commands are cached in DIR/teacher.npz, shard by shard. SIGTERM stops the teacher
+after its chunk of source steps, or training after its epoch (its state in
+DIR/training_state.npz), and exits 143: rerun the same command to go on. --max-wall-s stops the
+teacher the same way, and training keeping the best iterate so far (as `ccgan.distill`).
 
     python -m ccgan.distill_range --out DIR            # the range on one GPU (PAPER_SETTINGS)
     python -m ccgan.distill_range --out DIR --quick    # a few minutes on a CPU, to try the path

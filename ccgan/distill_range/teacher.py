@@ -123,6 +123,9 @@ def teacher_over_media(
     theta = media_theta(arm_c, media, medium)
     mpc_cfg = planner_config(config)
     commands = np.zeros_like(programs)
+    planned_before = sorted(name for name in store if name.startswith("c_k"))
+    if planned_before:
+        log(f"teacher: {', '.join(planned_before)} read from {cache}")
     for k in sorted({m.k for m in media}):
         of_k = np.flatnonzero(np.isin(medium, [i for i, m in enumerate(media) if m.k == k]))
         for piece, shard in enumerate(_shards(of_k, config.teacher_shard)):
