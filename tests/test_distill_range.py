@@ -249,6 +249,15 @@ def test_the_cli_refuses_bad_settings_before_any_work(tmp_path, capsys):
         assert not (tmp_path / "o").exists()
 
 
+def test_a_second_writer_of_one_folder_is_refused_before_any_work(tmp_path, capsys):
+    from test_run_folder import held_by_another_process
+
+    with held_by_another_process(tmp_path / "o", beside=True) as pid:
+        with pytest.raises(SystemExit) as exc:
+            distill_range.main(["--quick", "--out", str(tmp_path / "o")])
+    assert exc.value.code == 2 and f"in use by process {pid}" in capsys.readouterr().err
+
+
 def test_scoring_runs_each_medium_in_its_own_arm_at_the_rules_k(
     conditioned, source_arm, constrained_arm, constrained_scale
 ):

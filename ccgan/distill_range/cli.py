@@ -11,7 +11,7 @@ from pathlib import Path
 
 import mjx_arm  # noqa: F401  (before jax: sets the XLA CPU flag)
 from ccgan import checkpoint
-from ccgan.cli import add_config_flags, check_output_dir, cli_parser, config_from_args
+from ccgan.cli import add_config_flags, cli_parser, config_from_args, lock_output_dir
 from ccgan.distill.config import DistillConfig
 from ccgan.distill_range.config import RangeConfig
 from ccgan.media_range import MEDIA_RANGE, N_CONDITION, MediaRange
@@ -88,7 +88,8 @@ def build_parser(doc: str = __doc__) -> argparse.ArgumentParser:
 def parse(argv: list[str] | None, doc: str = __doc__):
     """(parser, arguments, RangeConfig, DistillConfig) of a command line: the preset
     (`QUICK_SETTINGS` with --quick, else `PAPER_SETTINGS`) first, so that every flag given
-    overrides it. Bad settings are usage errors (status 2), before any work."""
+    overrides it. Bad settings, and an --out another process writes, are usage errors (status
+    2), before any work."""
     argv = list(sys.argv[1:] if argv is None else argv)
     p = build_parser(doc)
     a = p.parse_args((QUICK_SETTINGS if "--quick" in argv else PAPER_SETTINGS) + argv)
@@ -101,7 +102,7 @@ def parse(argv: list[str] | None, doc: str = __doc__):
     if len(set(seeds)) != len(seeds):
         p.error(f"--seeds must be distinct, got {seeds}")
     a.seeds = seeds
-    check_output_dir(p, "--out", a.out)
+    lock_output_dir(p, "--out", a.out)  # one writer per folder: its teacher.npz is rewritten
     return p, a, range_config, config
 
 
