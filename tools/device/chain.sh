@@ -10,9 +10,10 @@
 # `python -m experiments.paper --out $TMP/paper --jobs ${JOBS:-6} --deadline-s ${DEADLINE_S:-500}`
 # (up to JOBS stages at once, of which one training per GPU: the config's "gpu" stages take
 # turns; a stage stopped at the deadline keeps its folder and continues
-# in the next call); puts into $OUT the whole run folder as paper_state.tar.gz.part-NN (pieces of
-# 15 MiB: the device returns no larger file) with paper_state.sha256, plus paper.md, the log and
-# the GPU's use sampled every 15 s. The deadline, the 60 s a stopped stage may take to end its
+# in the next call); puts into $OUT paper_results.tar.gz (what docs/chain.md says to commit),
+# paper.md, the log and the GPU's use sampled every 15 s, and the whole run folder as
+# paper_state.tar.gz.part-NN (pieces of 15 MiB: the device returns no larger file) with
+# paper_state.sha256 when they fit the 8 files a call returns. The deadline, the 60 s a stopped stage may take to end its
 # epoch and checkpoint (experiments.stages.STOP_GRACE_S), the install and the packing stay under
 # the device's 600 s per call. Keep DEADLINE_S at about 500: at 550 the 600 s limit came during the
 # packing and the call returned nothing (results/paper/rerun_2026-11-26/README.md, call 2).
