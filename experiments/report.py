@@ -116,6 +116,8 @@ def timeline_lines(chain: Chain) -> list[str]:
     for name in chain.stages:
         attempts, finished = attempts_of(chain, name)
         for a in attempts:
+            if "started" not in a:  # records written before attempts kept their start
+                continue
             start = datetime.fromisoformat(a["started"])
             starts.append(start)
             rows.append((start, name, a, finished))
