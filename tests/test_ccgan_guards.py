@@ -502,6 +502,7 @@ def test_changed_config_names_the_differing_fields(tmp_path):
     assert "epochs" not in msg  # unchanged fields are not listed
 
 
+@pytest.mark.slow  # two forward trainings on this CPU: 69 s in CI (docs/testing.md)
 def test_forward_models_trained_once_serve_other_runs_only_when_they_fit(
     tmp_path, files, small_arm, capsys
 ):
