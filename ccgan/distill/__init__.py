@@ -43,16 +43,13 @@ from ccgan.distill.config import ConfigError, DistillConfig
 from ccgan.distill.hold import choose_hold_factor
 from ccgan.distill.imitation import (
     ImitationData,
-    _best_of_seeds,
-    _epoch,
-    _load_training,
     _new_history,
     _resume_key,
-    _save_training,
     head_weights,
     imitation_data,
     init_imitation,
     make_validation,
+    train_with_resume,
     window_and_whole_x_err_cm,
     with_generator_unroll,
 )
@@ -64,7 +61,7 @@ from ccgan.distill.teacher import (
     teacher_cache_key,
     teacher_data,
 )
-from ccgan.stage import BestIterates, common_k, start_stage, validated_loop
+from ccgan.stage import common_k, start_stage
 from ccgan.translator import Translator
 from tracking import mpc, mpc_mjx
 
@@ -151,70 +148,26 @@ def distill(
     score_arm = arm_c.planning_copy(config.score_substeps)
     validate = make_validation(translators[0], score_arm, k, data)
     key = _resume_key(config, k, stacked)
-    saved = None if resume is None else _load_training(resume, key, stacked, opt_state, log)
 
-    def validate_epoch(epoch: int, params) -> np.ndarray:
-        """Scores the parameters, adds the scores to the history; returns the [S] score."""
-        scores = validate(params)
-        history["val"][epoch] = {name: v.tolist() for name, v in scores.items()}
-        return scores["score"]
-
-    if saved is None:
-        first = 1
+    def new_history() -> dict:
         history = _new_history(score_arm, k, data)
         if k_choice is not None:
             history["k_choice"] = k_choice
-        best = BestIterates.start(stacked, validate_epoch(0, stacked))
-        rng = np.random.default_rng(config.seed)
-    else:
-        done, stacked, opt_state, best, history, rng = saved
-        first = done + 1
-        log(f"resuming from {resume}: {done} of {config.epochs} epochs done")
-    teacher = history["teacher_val_x_err_cm"]
-    log(
-        f"held-out X_err (cm; mean of first {config.window_s} s and whole): before"
-        f" {np.round(history['val'][0]['score'], 4).tolist()}; teacher: window"
-        f" {teacher['window']:.4f}, whole {teacher['whole']:.4f}"
-    )
-    latest: dict = {}  # the last epoch's (epoch, params, opt_state), kept for a stop
+        return history
 
-    def train_once(epoch: int, params, opt_state):
-        """One pass over the teacher programs in a random order."""
-        order = rng.permutation(n_train)
-        params, opt_state, loss = _epoch(step, params, opt_state, data, order, config.batch_size)
-        history["train_loss"].append(loss.tolist())
-        latest.update(epoch=epoch, params=params, opt_state=opt_state)
-        return params, opt_state, loss
-
-    def report(best: BestIterates) -> None:
-        on_validation(_best_of_seeds(best, history, t0), history)
-
-    best = validated_loop(
-        config.epochs,
-        stacked,
-        opt_state,
-        best,
-        train_once,
-        validate_epoch,
-        None if on_validation is None else report,
-        config=config,
-        t0=t0,
-        desc="distill",
-        unit="epoch",
-        progress=progress,
-        log=log,
-        stop=stop,
-        start=first,
-    )
-    history["complete"] = stop is None or not stop.is_set()
-    if resume is not None and not history["complete"] and latest:
-        _save_training(
-            resume, key, latest["epoch"], latest["params"], latest["opt_state"], best, history, rng
+    def start_line(history: dict) -> str:
+        teacher = history["teacher_val_x_err_cm"]
+        return (
+            f"held-out X_err (cm; mean of first {config.window_s} s and whole): before"
+            f" {np.round(history['val'][0]['score'], 4).tolist()}; teacher: window"
+            f" {teacher['window']:.4f}, whole {teacher['whole']:.4f}"
         )
-        log(f"training state after epoch {latest['epoch']} kept in {resume}")
-    elif resume is not None and history["complete"]:
-        resume.unlink(missing_ok=True)
-    return _best_of_seeds(best, history, t0), history
+
+    return train_with_resume(
+        config, step, stacked, opt_state, data, n_train, validate, new_history, start_line,
+        key=key, resume=resume, on_validation=on_validation, t0=t0, desc="distill",
+        progress=progress, log=log, stop=stop,
+    )  # fmt: skip
 
 
 def main(argv=None) -> None:

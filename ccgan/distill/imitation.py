@@ -22,7 +22,7 @@ import mjx_arm  # noqa: F401  (before jax: sets the XLA CPU flag)
 from ccgan.data import PRESSURE_DIM, normalise_pressure, samples
 from ccgan.distill.config import DistillConfig
 from ccgan.distill.teacher import teacher_data
-from ccgan.stage import BestIterates, generator_commands
+from ccgan.stage import BestIterates, generator_commands, validated_loop
 from ccgan.translator import Translator
 from mjx_arm.atomic import write_atomically
 from tracking.held import run_dc, stretch
@@ -281,3 +281,86 @@ def with_generator_unroll(translators: list[Translator], unroll: int) -> list[Tr
         else t
         for t in translators
     ]
+
+
+def train_with_resume(
+    config: DistillConfig,
+    step,
+    stacked,
+    opt_state,
+    data: ImitationData,
+    n_train: int,
+    validate,
+    new_history,
+    start_line,
+    *,
+    key: str,
+    resume: Path | None,
+    on_validation,
+    t0: float,
+    desc: str,
+    progress: bool,
+    log,
+    stop,
+) -> tuple[list[dict], dict]:
+    """The imitation's epochs, validated and resumable: shared by `ccgan.distill` (one medium)
+    and `ccgan.distill_range` (a range of media), which differ only in their data, scores and
+    history.
+
+    Args:
+      step, stacked, opt_state: `init_imitation`'s.
+      data, n_train: the training programs and how many one epoch passes over.
+      validate: params -> {"score": [S] cm, ...}, the held-out scores that pick the iterate.
+      new_history: () -> the history of a fresh run (its "val" filled in here).
+      start_line: history -> the line logged before the first epoch.
+      key: the run's settings, for `resume` (`_resume_key`).
+      resume, on_validation, stop: as `ccgan.distill.distill` takes them.
+
+    Returns:
+      (`_best_of_seeds`, history, with "complete" whether training ran to its end).
+    """
+    saved = None if resume is None else _load_training(resume, key, stacked, opt_state, log)
+
+    def validate_epoch(epoch: int, params) -> np.ndarray:
+        """Scores the parameters, adds the scores to the history; returns the [S] score."""
+        scores = validate(params)
+        history["val"][epoch] = {name: v.tolist() for name, v in scores.items()}
+        return scores["score"]
+
+    if saved is None:
+        first = 1
+        history = new_history()
+        best = BestIterates.start(stacked, validate_epoch(0, stacked))
+        rng = np.random.default_rng(config.seed)
+    else:
+        done, stacked, opt_state, best, history, rng = saved
+        first = done + 1
+        log(f"resuming from {resume}: {done} of {config.epochs} epochs done")
+    log(start_line(history))
+    latest: dict = {}  # the last epoch's (epoch, params, opt_state), kept for a stop
+
+    def train_once(epoch: int, params, opt_state):
+        """One pass over the teacher programs in a random order."""
+        order = rng.permutation(n_train)
+        params, opt_state, loss = _epoch(step, params, opt_state, data, order, config.batch_size)
+        history["train_loss"].append(loss.tolist())
+        latest.update(epoch=epoch, params=params, opt_state=opt_state)
+        return params, opt_state, loss
+
+    def report(best: BestIterates) -> None:
+        on_validation(_best_of_seeds(best, history, t0), history)
+
+    best = validated_loop(
+        config.epochs, stacked, opt_state, best, train_once, validate_epoch,
+        None if on_validation is None else report, config=config, t0=t0, desc=desc,
+        unit="epoch", progress=progress, log=log, stop=stop, start=first,
+    )  # fmt: skip
+    history["complete"] = stop is None or not stop.is_set()
+    if resume is not None and not history["complete"] and latest:
+        _save_training(
+            resume, key, latest["epoch"], latest["params"], latest["opt_state"], best, history, rng
+        )
+        log(f"training state after epoch {latest['epoch']} kept in {resume}")
+    elif resume is not None and history["complete"]:
+        resume.unlink(missing_ok=True)
+    return _best_of_seeds(best, history, t0), history

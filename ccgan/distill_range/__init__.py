@@ -57,12 +57,9 @@ import numpy as np
 import mjx_arm
 from ccgan.distill.config import DistillConfig
 from ccgan.distill.imitation import (
-    _best_of_seeds,
-    _epoch,
-    _load_training,
     _resume_key,
-    _save_training,
     init_imitation,
+    train_with_resume,
     with_generator_unroll,
 )
 from ccgan.distill.teacher import _stop_check
@@ -81,7 +78,6 @@ from ccgan.distill_range.media import (
 )
 from ccgan.distill_range.teacher import teacher_over_media
 from ccgan.media_range import MediaRange
-from ccgan.stage import BestIterates, validated_loop
 from ccgan.translator import Translator
 from mjx_arm.identify_family import resolved_viscosity_scale
 from tracking import mpc_mjx
@@ -148,55 +144,21 @@ def distill_range(
     validate = make_range_validation(translators[0], score_arms, training, data)
     media_key = [[m.drag_ratio, m.stiffness_scale, m.k] for m in training]
     key = _resume_key(config, media_key, stacked)
-    saved = None if resume is None else _load_training(resume, key, stacked, opt_state, log)
 
-    def validate_epoch(epoch: int, params) -> np.ndarray:
-        scores = validate(params)
-        history["val"][epoch] = {name: v.tolist() for name, v in scores.items()}
-        return scores["score"]
-
-    if saved is None:
-        first = 1
-        history = start_history(score_arms, training, data)
-        best = BestIterates.start(stacked, validate_epoch(0, stacked))
-        rng = np.random.default_rng(config.seed)
-    else:
-        done, stacked, opt_state, best, history, rng = saved
-        first = done + 1
-        log(f"resuming from {resume}: {done} of {config.epochs} epochs done")
-    log(
-        f"held-out X_err (cm; mean over {len(training)} training media): before"
-        f" {np.round(history['val'][0]['score'], 4).tolist()}; teacher"
-        f" {history['teacher_val_x_err_cm']['score']:.4f}; stretch only"
-        f" {history['stretch_val_x_err_cm']['score']:.4f}"
-    )
-    latest: dict = {}
-    n_train = len(data.s_train)
-
-    def train_once(epoch: int, params, opt_state):
-        order = rng.permutation(n_train)
-        params, opt_state, loss = _epoch(step, params, opt_state, data, order, config.batch_size)
-        history["train_loss"].append(loss.tolist())
-        latest.update(epoch=epoch, params=params, opt_state=opt_state)
-        return params, opt_state, loss
-
-    def report(best: BestIterates) -> None:
-        on_validation(_best_of_seeds(best, history, t0), history)
-
-    best = validated_loop(
-        config.epochs, stacked, opt_state, best, train_once, validate_epoch,
-        None if on_validation is None else report, config=config, t0=t0, desc="distill_range",
-        unit="epoch", progress=progress, log=log, stop=stop, start=first,
-    )  # fmt: skip
-    history["complete"] = stop is None or not stop.is_set()
-    if resume is not None and not history["complete"] and latest:
-        _save_training(
-            resume, key, latest["epoch"], latest["params"], latest["opt_state"], best, history, rng
+    def start_line(history: dict) -> str:
+        return (
+            f"held-out X_err (cm; mean over {len(training)} training media): before"
+            f" {np.round(history['val'][0]['score'], 4).tolist()}; teacher"
+            f" {history['teacher_val_x_err_cm']['score']:.4f}; stretch only"
+            f" {history['stretch_val_x_err_cm']['score']:.4f}"
         )
-        log(f"training state after epoch {latest['epoch']} kept in {resume}")
-    elif resume is not None and history["complete"]:
-        resume.unlink(missing_ok=True)
-    return _best_of_seeds(best, history, t0), history
+
+    return train_with_resume(
+        config, step, stacked, opt_state, data, len(data.s_train), validate,
+        lambda: start_history(score_arms, training, data), start_line,
+        key=key, resume=resume, on_validation=on_validation, t0=t0, desc="distill_range",
+        progress=progress, log=log, stop=stop,
+    )  # fmt: skip
 
 
 def main(argv: list[str] | None = None) -> None:
