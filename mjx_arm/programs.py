@@ -251,6 +251,17 @@ def shape_like_programs(
     )
 
 
+def shape_like_kinds(n: int, seed: int = 0, split: str = "train") -> list[str]:
+    """The kind (`SHAPE_LIKE_KINDS`) of each of the first n programs of `shape_like_programs(n,
+    ..., seed, split)`, whatever their duration or scale: the first draw of each program's
+    stream. What a study reports error per program family by."""
+    stream = stream_id("shape_like", split)
+    return [
+        SHAPE_LIKE_KINDS[np.random.default_rng([seed, stream, i]).integers(len(SHAPE_LIKE_KINDS))]
+        for i in range(n)
+    ]
+
+
 #: Shape name -> program function(duration_s=60.0) -> [T, 3] commands (bar).
 SHAPES: dict[str, Callable[..., np.ndarray]] = {
     "circle": circle,

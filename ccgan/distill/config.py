@@ -8,7 +8,10 @@ import mjx_arm  # noqa: F401  (before jax: sets the XLA CPU flag)
 from mjx_arm import arm as mjx_arm_arm
 from tracking.config import ConfigError, check_fields, check_ints
 
-__all__ = ["ConfigError", "DistillConfig"]
+__all__ = ["ConfigError", "DistillConfig", "SOURCE_SIMULATORS"]
+
+#: What can give the D_s poses a teacher tracks (`DistillConfig.source_simulator`).
+SOURCE_SIMULATORS = ("chain", "rod")
 
 
 @dataclasses.dataclass(frozen=True)
@@ -93,6 +96,12 @@ class DistillConfig:
     k_choice_seconds: float = 20.0
     """Length of the validation program that chooses k among k_candidates (s; eval.shapes's is
     20 s)."""
+    source_simulator: str = "chain"
+    """What gives the D_s poses the teacher tracks and G_c reads: "chain" (the chain's D_s arm,
+    MuJoCo C) or "rod" (the reference rod in D_s, float64: `mjx_arm.load_rod("source")`), for a
+    translator meant for an arm whose D_s paths are the rod's. The translator is asked to make
+    the target trace its own arm's D_s path; taught on the chain's, it inherits the chain's D_s
+    model error (1.3-6.4% of L on the five shapes, `results/fidelity.md`)."""
 
     def __post_init__(self):
         """Refuses settings that would fail late, after the teacher's commands are computed and
@@ -129,6 +138,11 @@ class DistillConfig:
         if self.teacher_backend not in ("c", "mjx"):
             raise ConfigError(
                 "teacher_backend", f"must be 'c' or 'mjx', got {self.teacher_backend!r}"
+            )
+        if self.source_simulator not in SOURCE_SIMULATORS:
+            raise ConfigError(
+                "source_simulator",
+                f"must be one of {SOURCE_SIMULATORS}, got {self.source_simulator!r}",
             )
         if self.teacher_backend == "mjx" and self.horizon_steps != 1:
             raise ConfigError(
@@ -169,4 +183,6 @@ class DistillConfig:
             key["mjx_matmul_precision"] = mjx_arm_arm.MJX_MATMUL_PRECISION
         if self.teacher_substeps:  # caches planned in the arm itself keep their key
             key["teacher_substeps"] = self.teacher_substeps
+        if self.source_simulator != "chain":  # caches of the chain's D_s paths keep their key
+            key["source_simulator"] = self.source_simulator
         return key

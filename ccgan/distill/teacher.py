@@ -21,7 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
-import mjx_arm  # noqa: F401  (before jax: sets the XLA CPU flag)
+import mjx_arm  # (before jax: sets the XLA CPU flag)
 from ccgan.checkpoint import differences
 from ccgan.distill.config import DistillConfig
 from mjx_arm.atomic import link_or_copy, write_atomically
@@ -95,6 +95,15 @@ def held_out_programs(config: DistillConfig) -> np.ndarray:
             if split.startswith("val") and n > 0
         ]
     )
+
+
+def source_poses(config: DistillConfig, arm_s, programs: np.ndarray) -> np.ndarray:
+    """The D_s poses [N, T, 6] (m, unit d3) of programs [N, T, 3] (bar) that the teacher tracks:
+    from the chain's D_s arm `arm_s` in MuJoCo C, or from the reference rod in D_s (float64)
+    with `config.source_simulator` "rod"."""
+    if config.source_simulator == "rod":
+        return mjx_arm.load_rod("source").rollout(programs)
+    return arm_s.rollout(programs, backend="c")
 
 
 def planner_config(config: DistillConfig) -> mpc.MpcConfig:
@@ -274,7 +283,7 @@ def teacher_data(
         shard = _next_shard(pending, config.teacher_shard)
         t0 = time.perf_counter()
         programs = np.concatenate([piece for _, piece in shard])
-        targets = arm_s.rollout(programs, backend="c")
+        targets = source_poses(config, arm_s, programs)
         commands, _ = track(plan_arm, targets, k, programs, mpc_cfg, progress=progress, **resumable)
         new = {"p": programs, "x": targets, "c": commands[:, k - 1 :: k]}
         first = 0
