@@ -10,15 +10,18 @@
 #   bash tools/device/rod_source.sh teachers   # both teachers at once -> $OUT/teachers.tar
 #   bash tools/device/rod_source.sh distill    # both distillations at once, then
 #                                              # studies.rod_transfer -> $OUT/distill.tar
-#   bash tools/device/rod_source.sh shapes     # the five shapes in the rod, once -> $OUT/shapes.tar
+#   bash tools/device/rod_source.sh shapes     # the five shapes in the rod, once -> $OUT/shapes_*
 #
-# Sequence of `run` calls (nvidia-h200, timeout_s 600):
-#   1. carry [".whl"]: teachers. Untar what comes back into runs/rod_source/ HERE.
-#   2. carry ["runs/rod_source"]: distill (reads runs/rod_source/<variant>/teacher.npz).
-#      Untar into runs/rod_source/ HERE.
-#   3. carry ["runs/rod_source"]: shapes.
-# A machine that went cold between calls needs .whl again: carry it beside runs/rod_source.
-# Copy the results into studies/results/h200/rod_source/.
+# Sequence of `run` calls (nvidia-h200, timeout_s 600), as made on 2026-12-01:
+#   1. carry [".whl"]: teachers (about 200 s, both at once). Untar into the repository HERE.
+#   2. The tree (~39 MiB) leaves no room for .whl and both teachers (6 MiB each) in one call:
+#      PIECES=2 bash tools/device/cut_wheels.sh HERE, then carry [".whl-extra1",
+#      "runs/rod_source/chain/teacher"] with a command that only sources install.sh, and at
+#      once carry [".whl-extra2", "runs/rod_source/rod/teacher"]: distill (both distillations
+#      about 340 s at once; the study's 12 programs about 360 s more, so a second call may be
+#      needed: the same study command alone, on the warm machine).
+#   3. carrying nothing, on the warm machine: shapes (about 255 s per translator scored).
+# Results: studies/results/h200/rod_source/ (its README).
 set -uo pipefail
 source "$(dirname "${BASH_SOURCE[0]}")/install.sh" || exit 1
 phase=${1:?teachers, distill or shapes}
@@ -72,7 +75,7 @@ distill)
   run_both distill.out distill
   status=$?
   mkdir -p "$RUN/study"
-  $PY -m studies.rod_transfer --diagnose --out "$RUN/study/rod_transfer" --translators \
+  $PY -m studies.rod_transfer --diagnose --n-shape-like 4 --n-other 2 --out "$RUN/study/rod_transfer" --translators \
     "privileged=$(echo "$CHAIN_SIM"/translator_seed{0,1,2}.ckpt | tr ' ' ,)" \
     "chain_source=$(echo "$RUN"/chain/distill/translator_seed{0,1,2}.ckpt | tr ' ' ,)" \
     "rod_source=$(echo "$RUN"/rod/distill/translator_seed{0,1,2}.ckpt | tr ' ' ,)" \
@@ -81,18 +84,10 @@ distill)
     "$RUN"/*/distill "$RUN"/*/distill.out.log "$RUN/study"
   exit $status
   ;;
-shapes)
-  $PY -m eval.shapes --simulator rod --model models/softarm.xml \
-    --methods none stretch ccgan_sim ccgan_ident --no-robustness \
-    --distilled-path "$CHAIN_SIM/translator.ckpt" \
-    --identified-path "$RUN/rod/distill/translator.ckpt" --out "$RUN/shapes_rod_source"
-  status=$?
+shapes) # the variant that won on held-out programs (chain), scored once
   $PY -m eval.shapes --simulator rod --model models/softarm.xml \
     --methods none stretch ccgan_ident --no-robustness \
-    --identified-path "$RUN/chain/distill/translator.ckpt" --out "$RUN/shapes_chain_source" \
-    || status=1
-  tar -cf "$OUT/shapes.tar" "$RUN"/shapes_*
-  exit $status
+    --identified-path "$RUN/chain/distill/translator.ckpt" --out "$OUT/shapes_chain_source"
   ;;
 *)
   echo "unknown phase $phase: teachers, distill or shapes" && exit 2
