@@ -11,6 +11,7 @@ Cases (each run by ``--case``; every run rewrites the table from all the case fo
   MuJoCo C (own program streams, not D_c's) and written with the Domain's values in its metadata,
   so identify.md sets the truth beside the fit. The fit starts from D_c itself (20.117, 1): the
   truth is then half and twice the start, inside the search grid [start / 3, start x 3].
+- ``aged``: the aged arm (D_c's medium, stiffness x0.7) the same way, from the same start.
 - ``rod``: the reference rod in D_c (`--rod-data`, a ``python -m mjx_arm.babble --backend rod``
   folder) as the truth. The chain's family does not contain it, so there is no truth column;
   instead the held-out tip RMS against the rod of three chain arms on the same held-out
@@ -22,6 +23,8 @@ Cases (each run by ``--case``; every run rewrites the table from all the case fo
   an arm identified from the rod's babbling chooses the rod's k. Writes OUT/rod_k/rod_k.json.
 
     python -m studies.identify_targets --out studies/results/cpu/identify --case half_drag
+    python -m studies.identify_targets --out studies/results/cpu/identify_50 --case aged --n 50 \\
+        --duration 60
     python -m studies.identify_targets --out studies/results/cpu/identify --case rod \\
         --rod-data /work/rod_data_gpu/babble --rod-n-programs 10
 
@@ -45,8 +48,9 @@ from mjx_arm import arm as arm_lib
 from mjx_arm import babble, dataset, domains, identify, identify_cli, identify_family
 from studies.checks import parse_checked_args
 
-#: Each custom medium's viscosity as a factor on D_c's (stiffness 1).
-MEDIA = {"half_drag": 0.5, "double_drag": 2.0}
+#: Each custom medium: (its viscosity as a factor on D_c's, its stiffness scale). "aged" is the
+#: built-in aged arm (D_c's medium, stiffness x0.7), babbled here in its own program stream.
+MEDIA = {"half_drag": (0.5, 1.0), "double_drag": (2.0, 1.0), "aged": (1.0, 0.7)}
 CASES = (*MEDIA, "rod", "rod_k")
 #: Hold factors the rod_k case compares: eval's stretch only candidates around D_c's best.
 K_CANDIDATES = (10, 15, 20, 25)
@@ -65,9 +69,13 @@ def dc_viscosity_scale(model: str | None = None) -> float:
 
 
 def medium_domain(case: str, model: str | None = None) -> domains.Domain:
-    """The Domain of a custom medium case: `MEDIA`[case] times D_c's viscosity, stiffness 1."""
+    """The Domain of a custom medium case: `MEDIA`[case]'s factor times D_c's viscosity, and its
+    stiffness scale."""
+    viscosity_factor, stiffness = MEDIA[case]
     return domains.Domain(
-        name=case, viscosity_scale=MEDIA[case] * dc_viscosity_scale(model), stiffness_scale=1.0
+        name=case,
+        viscosity_scale=viscosity_factor * dc_viscosity_scale(model),
+        stiffness_scale=stiffness,
     )
 
 
@@ -305,7 +313,7 @@ def build_parser() -> argparse.ArgumentParser:
         "--case",
         nargs="*",
         choices=CASES,
-        default=list(MEDIA),
+        default=["half_drag", "double_drag"],
         help="cases to run (none: only write the table again from the case folders)",
     )
     p.add_argument("--method", choices=(*identify.METHODS, "both"), default="search")
