@@ -37,3 +37,46 @@ def test_the_rods_targets_are_the_rods_d_s_path_not_the_chains(small_xml):
     assert rod_targets.shape == chain_targets.shape == (2, 8, 6)
     # The two simulators differ, so the option changes what the teacher tracks.
     assert np.abs(rod_targets[:, :, :3] - chain_targets[:, :, :3]).max() > 1e-4
+
+
+#: A committed translator (CCGAN-GP, k = 15) whose commands the correction runs.
+CORRECTION_TRANSLATOR = "results/paper/rerun_2026-11-27/run/ccgan/translator_seed0.ckpt"
+
+
+def test_a_correction_translator_gets_its_own_cache_key_and_a_missing_one_is_refused(small_xml):
+    arm_c = mjx_arm.load(xml=small_xml, domain="constrained")
+    corrected = DistillConfig(correction_translator=CORRECTION_TRANSLATOR)
+    key = json.loads(teacher_cache_key(corrected, 15, arm_c))["correction"]
+    assert key["domain"] == "constrained" and key["dtype"] == "float32"
+    assert len(key["translator_sha256"]) == 64
+    assert "correction" not in json.loads(teacher_cache_key(DistillConfig(), 15, arm_c))
+    with pytest.raises(ConfigError, match="correction_translator"):
+        DistillConfig(correction_translator="no/such/translator.ckpt")
+    with pytest.raises(ConfigError, match="correction_dtype"):
+        DistillConfig(correction_translator=CORRECTION_TRANSLATOR, correction_dtype="float16")
+
+
+def test_the_corrected_targets_move_by_the_rods_difference_from_the_arm(small_xml):
+    """x_s - (rod(u0) - arm(u0)) at every k-th period: the rod, the arm plus that difference,
+    then traces x_s where the arm traces the corrected target."""
+    from ccgan.distill.teacher import corrected_targets
+    from ccgan.translator import load_translator
+
+    arm_s = mjx_arm.load(xml=small_xml, domain="source")
+    arm_c = mjx_arm.load(xml=small_xml, domain="constrained")
+    programs = np.zeros((2, 6, 3))
+    programs[:, 1:, 0] = 2.0
+    programs[1, 3:, 2] = 1.5
+    targets = arm_s.rollout(programs, backend="c")
+    config = DistillConfig(correction_translator=CORRECTION_TRANSLATOR, correction_dtype="float64")
+    k = 15
+    got = corrected_targets(config, arm_c, programs, targets, k, log=lambda _: None)
+    translator = load_translator(CORRECTION_TRANSLATOR)
+    u0 = np.stack([translator.translate(p, x)[0] for p, x in zip(programs, targets, strict=True)])
+    assert u0.shape == (2, 6 * k, 3)
+    rod = mjx_arm.load_rod("constrained").rollout(u0)[:, k - 1 :: k]
+    arm = arm_c.rollout(u0, backend="c")[:, k - 1 :: k]
+    np.testing.assert_allclose(got, targets - (rod - arm), atol=1e-12)
+    assert np.abs(got - targets)[..., :3].max() > 1e-5  # the rod is not the arm: it moves them
+    with pytest.raises(ValueError, match="holds k = 15"):
+        corrected_targets(config, arm_c, programs, targets, 20)

@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import dataclasses
+import hashlib
+from pathlib import Path
 
 import mjx_arm  # noqa: F401  (before jax: sets the XLA CPU flag)
 from mjx_arm import arm as mjx_arm_arm
@@ -102,6 +104,19 @@ class DistillConfig:
     translator meant for an arm whose D_s paths are the rod's. The translator is asked to make
     the target trace its own arm's D_s path; taught on the chain's, it inherits the chain's D_s
     model error (1.3-6.4% of L on the five shapes, `results/fidelity.md`)."""
+    correction_translator: str = ""
+    """A translator file whose commands, run on the target (the reference rod in
+    `correction_domain`) and in the arm the teacher plans in, correct the teacher's targets: one
+    step of iterative learning control. With d = rod(u0) - arm(u0) the pose difference along its
+    commands u0 (every k-th pose, k the teacher's), the teacher tracks x_s - d, so that the rod,
+    which is the arm plus d, traces x_s; G_c still reads x_s, and the held-out programs are
+    scored in the arm against x_s - d. The target's own rollouts of training programs (never a
+    test shape) are what a user of a real arm can record. Empty: no correction."""
+    correction_domain: str = "constrained"
+    """The reference rod's domain the correction's target rollouts run in (`mjx_arm.load_rod`)."""
+    correction_dtype: str = "float32"
+    """The rod's dtype for the correction's rollouts: float32 is 9x faster on a GPU and 1e-4 of
+    L from float64 (`bench/results/h100/rod_throughput_8192`), far below the 1% of L it corrects."""
 
     def __post_init__(self):
         """Refuses settings that would fail late, after the teacher's commands are computed and
@@ -144,6 +159,14 @@ class DistillConfig:
                 "source_simulator",
                 f"must be one of {SOURCE_SIMULATORS}, got {self.source_simulator!r}",
             )
+        if self.correction_translator and not Path(self.correction_translator).is_file():
+            raise ConfigError(
+                "correction_translator", f"{self.correction_translator}: no such file"
+            )
+        if self.correction_dtype not in ("float32", "float64"):
+            raise ConfigError(
+                "correction_dtype", f"must be float32 or float64, got {self.correction_dtype!r}"
+            )
         if self.teacher_backend == "mjx" and self.horizon_steps != 1:
             raise ConfigError(
                 "horizon_steps", f"must be 1 with teacher_backend 'mjx', got {self.horizon_steps}"
@@ -185,4 +208,22 @@ class DistillConfig:
             key["teacher_substeps"] = self.teacher_substeps
         if self.source_simulator != "chain":  # caches of the chain's D_s paths keep their key
             key["source_simulator"] = self.source_simulator
+        if self.correction_translator:  # uncorrected caches keep their key
+            key["correction"] = {
+                "translator_sha256": file_sha256(self.correction_translator),
+                "domain": self.correction_domain,
+                "dtype": self.correction_dtype,
+            }
         return key
+
+
+def file_sha256(path: str) -> str:
+    """Hex sha256 of a file's bytes (the correction's translator: which commands made it).
+
+    Raises:
+      ValueError: no such file.
+    """
+    try:
+        return hashlib.sha256(Path(path).read_bytes()).hexdigest()
+    except FileNotFoundError:
+        raise ValueError(f"correction_translator {path}: no such file") from None

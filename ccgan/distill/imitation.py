@@ -34,10 +34,12 @@ class ImitationData(NamedTuple):
 
     s_train [N, T, 9]: normalised samples (`ccgan.data.samples`) of the training programs;
     c_train [N, T, 3]: the teacher's commands for them (pressures normalised to [0, 1]);
-    s_val [V, T, 9] and x_val [V, T, 6] (float64): the held-out programs' samples and D_s
-    targets; p_val [V, T, 3]: their D_s commands (bar), which stretch only holds k periods;
-    c_val [V, T, 3]: the teacher's held-out commands (bar); teacher_val_x_err_cm [V]: the
-    teacher's own held-out X_err (cm); window: control steps in window_s.
+    s_val [V, T, 9] and x_val [V, T, 6] (float64): the held-out programs' samples and the
+    targets they are scored against (their D_s poses, or the teacher's corrected targets:
+    `teacher_data`'s "t_val"); p_val [V, T, 3]: their D_s commands (bar), which stretch only
+    holds k periods; c_val [V, T, 3]: the teacher's held-out commands (bar);
+    teacher_val_x_err_cm [V]: the teacher's own held-out X_err (cm); window: control steps in
+    window_s.
     """
 
     s_train: Any
@@ -70,7 +72,7 @@ def imitation_data(
         s_train=jnp.asarray(samples(data["p_train"], data["x_train"], bounds)),
         c_train=jnp.asarray(normalise_pressure(data["c_train"]), jnp.float32),
         s_val=jnp.asarray(samples(data["p_val"], data["x_val"], bounds)),
-        x_val=np.asarray(data["x_val"], np.float64),
+        x_val=np.asarray(data["t_val"], np.float64),
         p_val=np.asarray(data["p_val"], np.float64),
         c_val=data["c_val"],
         teacher_val_x_err_cm=data["teacher_val_x_err_cm"],

@@ -24,9 +24,11 @@ import numpy as np
 import mjx_arm  # (before jax: sets the XLA CPU flag)
 from ccgan.checkpoint import differences
 from ccgan.distill.config import DistillConfig
+from ccgan.translator import load_translator
 from mjx_arm.atomic import link_or_copy, write_atomically
 from mjx_arm.babble import BabbleConfig
 from mjx_arm.programs import babble_programs, shape_like_programs
+from mjx_arm.rollout_c import SimulationDivergedError
 from tracking import mpc, mpc_mjx
 from tracking.metrics import position_error_cm
 
@@ -104,6 +106,49 @@ def source_poses(config: DistillConfig, arm_s, programs: np.ndarray) -> np.ndarr
     if config.source_simulator == "rod":
         return mjx_arm.load_rod("source").rollout(programs)
     return arm_s.rollout(programs, backend="c")
+
+
+def corrected_targets(
+    config: DistillConfig, arm_c, programs: np.ndarray, targets: np.ndarray, k: int, log=print
+) -> np.ndarray:
+    """The teacher's targets [N, T, 6] corrected by the target's own rollouts (one step of
+    iterative learning control, `DistillConfig.correction_translator`): x_s - (rod(u0) -
+    arm(u0)) at every k-th period, u0 the correction translator's commands for programs
+    [N, T, 3] (bar) and their D_s poses `targets` [N, T, 6] (m, unit d3), the rod in
+    `config.correction_domain` and `arm_c` the arm the teacher plans in (MuJoCo C, its own
+    timestep).
+
+    Raises:
+      ValueError: the correction translator holds another k than the teacher's.
+    """
+    translator = load_translator(config.correction_translator)
+    if translator.k != k:
+        raise ValueError(
+            f"correction_translator {config.correction_translator} holds k = {translator.k},"
+            f" the teacher k = {k}: its rollouts would not be the ones the teacher corrects"
+        )
+    t0 = time.perf_counter()
+    commands = np.stack(
+        [translator.translate(p, x)[0] for p, x in zip(programs, targets, strict=True)]
+    )
+    rod = mjx_arm.load_rod(config.correction_domain, dtype=config.correction_dtype)
+    try:
+        on_target = rod.rollout(commands)[:, k - 1 :: k]
+    except SimulationDivergedError as err:
+        if config.correction_dtype == "float64":
+            raise
+        log(f"correction: {err}; all of them again in float64")
+        exact = mjx_arm.load_rod(config.correction_domain, dtype="float64")
+        on_target = exact.rollout(commands)[:, k - 1 :: k]
+    in_arm = arm_c.rollout(commands, backend="c")[:, k - 1 :: k]
+    difference = on_target - in_arm
+    log(
+        f"correction: {len(programs)} programs in the rod ({config.correction_domain},"
+        f" {config.correction_dtype}) and the arm, tip RMS between them"
+        f" {100 * np.sqrt(np.mean(np.sum(difference[..., :3] ** 2, -1))):.3f} cm"
+        f" ({time.perf_counter() - t0:.0f} s)"
+    )
+    return targets - difference
 
 
 def planner_config(config: DistillConfig) -> mpc.MpcConfig:
@@ -258,7 +303,9 @@ def teacher_data(
       ("train" has n_train + n_train_full + n_train_babble programs, "val" the same of val):
       "p_train" [N, T, 3] and "p_val" (bar), "x_train" [N, T, 6] and
       "x_val" (m, unit d3), "c_train" [N, T, 3] and "c_val" (teacher commands per source step,
-      bar), plus "teacher_val_x_err_cm" [n_val] (the teacher's own held-out X_err).
+      bar), "t_train" [N, T, 6] and "t_val" (the poses the teacher tracked: x, or with
+      `DistillConfig.correction_translator` x corrected by the target's rollouts), plus
+      "teacher_val_x_err_cm" [n_val] (the teacher's own held-out X_err against t_val).
     """
     key = teacher_cache_key(config, k, arm_c)
     splits = _splits(config)
@@ -284,8 +331,13 @@ def teacher_data(
         t0 = time.perf_counter()
         programs = np.concatenate([piece for _, piece in shard])
         targets = source_poses(config, arm_s, programs)
-        commands, _ = track(plan_arm, targets, k, programs, mpc_cfg, progress=progress, **resumable)
+        tracked = targets
+        if config.correction_translator:
+            tracked = corrected_targets(config, arm_c, programs, targets, k, log)
+        commands, _ = track(plan_arm, tracked, k, programs, mpc_cfg, progress=progress, **resumable)
         new = {"p": programs, "x": targets, "c": commands[:, k - 1 :: k]}
+        if config.correction_translator:
+            new["t"] = tracked
         first = 0
         for split, piece in shard:
             for name, value in new.items():
@@ -303,7 +355,8 @@ def teacher_data(
             cache.parent.mkdir(parents=True, exist_ok=True)
             write_atomically(cache, lambda f: np.savez_compressed(f, key=key, **store))
     data = {}
-    for part in ("p", "x", "c"):
+    parts = ("p", "x", "c", "t") if config.correction_translator else ("p", "x", "c")
+    for part in parts:
         for joined in ("train", "val"):
             pieces = [
                 store[f"{part}_{split}"][:n]
@@ -311,7 +364,9 @@ def teacher_data(
                 if split.split("_")[0] == joined and n > 0
             ]
             data[f"{part}_{joined}"] = np.concatenate(pieces)
+    if not config.correction_translator:
+        data["t_train"], data["t_val"] = data["x_train"], data["x_val"]
     score_arm = arm_c.planning_copy(config.score_substeps)
     poses = score_arm.rollout(np.repeat(data["c_val"], k, axis=1), backend="c")[:, k - 1 :: k]
-    data["teacher_val_x_err_cm"] = position_error_cm(poses, data["x_val"]).mean(-1)
+    data["teacher_val_x_err_cm"] = position_error_cm(poses, data["t_val"]).mean(-1)
     return data
