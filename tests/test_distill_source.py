@@ -80,3 +80,26 @@ def test_the_corrected_targets_move_by_the_rods_difference_from_the_arm(small_xm
     assert np.abs(got - targets)[..., :3].max() > 1e-5  # the rod is not the arm: it moves them
     with pytest.raises(ValueError, match="holds k = 15"):
         corrected_targets(config, arm_c, programs, targets, 20)
+
+
+def test_the_corrected_targets_are_kept_beside_the_cache_and_read_back(small_xml, tmp_path):
+    """The target's rollouts take minutes at full size: a run stopped while the teacher plans
+    reads them back; another key, or other programs, computes them again."""
+    from ccgan.distill.teacher import cached_corrected_targets, correction_path
+
+    arm_s = mjx_arm.load(xml=small_xml, domain="source")
+    arm_c = mjx_arm.load(xml=small_xml, domain="constrained")
+    programs = np.zeros((1, 5, 3))
+    programs[:, 1:, 1] = 2.5
+    targets = arm_s.rollout(programs, backend="c")
+    config = DistillConfig(correction_translator=CORRECTION_TRANSLATOR)
+    cache = tmp_path / "teacher.npz"
+    logs = []
+    first = cached_corrected_targets(config, arm_c, programs, targets, 15, "A", cache, logs.append)
+    assert correction_path(cache).is_file() and not any("read from" in m for m in logs)
+    again = cached_corrected_targets(config, arm_c, programs, targets, 15, "A", cache, logs.append)
+    np.testing.assert_array_equal(again, first)
+    assert "read from" in logs[-1]
+    other = cached_corrected_targets(config, arm_c, programs, targets, 15, "B", cache, logs.append)
+    np.testing.assert_allclose(other, first, atol=1e-12)  # computed again under key B
+    assert "read from" not in logs[-1]

@@ -140,15 +140,61 @@ def corrected_targets(
         log(f"correction: {err}; all of them again in float64")
         exact = mjx_arm.load_rod(config.correction_domain, dtype="float64")
         on_target = exact.rollout(commands)[:, k - 1 :: k]
+    t_rod = time.perf_counter() - t0
     in_arm = arm_c.rollout(commands, backend="c")[:, k - 1 :: k]
     difference = on_target - in_arm
     log(
         f"correction: {len(programs)} programs in the rod ({config.correction_domain},"
         f" {config.correction_dtype}) and the arm, tip RMS between them"
         f" {100 * np.sqrt(np.mean(np.sum(difference[..., :3] ** 2, -1))):.3f} cm"
-        f" ({time.perf_counter() - t0:.0f} s)"
+        f" (translation and rod {t_rod:.0f} s, arm {time.perf_counter() - t0 - t_rod:.0f} s)"
     )
     return targets - difference
+
+
+def correction_path(cache: Path) -> Path:
+    """Where the corrected targets are kept, beside the teacher cache: the target's rollouts
+    take minutes (546 s for 256 programs of 60 s at k = 20 on one H200, the rod's 6 million
+    sequential steps), so a run stopped while the teacher plans does not repeat them."""
+    return cache.with_name(cache.stem + "_correction.npz")
+
+
+def cached_corrected_targets(
+    config: DistillConfig,
+    arm_c,
+    programs: np.ndarray,
+    targets: np.ndarray,
+    k: int,
+    key: str,
+    cache: Path | None,
+    log=print,
+) -> np.ndarray:
+    """`corrected_targets`, read from `correction_path(cache)` when it holds this shard's
+    (the same teacher key, programs and D_s poses: entries are named by their sha256), else
+    computed and added to it. An unreadable file, or one of another key, is replaced."""
+    if cache is None:
+        return corrected_targets(config, arm_c, programs, targets, k, log)
+    path = correction_path(cache)
+    digest = hashlib.sha256(
+        np.ascontiguousarray(programs, np.float64).tobytes()
+        + np.ascontiguousarray(targets, np.float64).tobytes()
+    ).hexdigest()[:32]
+    entries = {}
+    if path.exists():
+        try:
+            with np.load(path) as f:
+                if str(f["key"]) == key:
+                    entries = {name: f[name] for name in f.files if name != "key"}
+        except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile):
+            entries = {}
+    if f"t_{digest}" in entries:
+        log(f"correction: {len(programs)} programs read from {path}")
+        return entries[f"t_{digest}"]
+    tracked = corrected_targets(config, arm_c, programs, targets, k, log)
+    entries[f"t_{digest}"] = tracked
+    path.parent.mkdir(parents=True, exist_ok=True)
+    write_atomically(path, lambda f: np.savez_compressed(f, key=key, **entries))
+    return tracked
 
 
 def planner_config(config: DistillConfig) -> mpc.MpcConfig:
@@ -333,7 +379,7 @@ def teacher_data(
         targets = source_poses(config, arm_s, programs)
         tracked = targets
         if config.correction_translator:
-            tracked = corrected_targets(config, arm_c, programs, targets, k, log)
+            tracked = cached_corrected_targets(config, arm_c, programs, targets, k, key, cache, log)
         commands, _ = track(plan_arm, tracked, k, programs, mpc_cfg, progress=progress, **resumable)
         new = {"p": programs, "x": targets, "c": commands[:, k - 1 :: k]}
         if config.correction_translator:
