@@ -1,29 +1,36 @@
 #!/usr/bin/env bash
 # Runs ON THE GPU MACHINE (the device tool's `run`), from the repository root of the copy sent
-# there. Two pieces of issue 50 in the same calls:
+# there. Two pieces of issue 50, one phase per call (each under the 600 s limit):
 #
+# (b) the aged arm, identified from 50 of its programs of 60 s (studies.identify_targets, with
+#     half and twice D_c's drag for (c)); a translator taught on the identified arm (k chosen
+#     there among 20, 25, 30), scored on the five shapes beside the privileged aged_sim.
 # (d) the rod: one step of iterative learning control for the data-only translator. The
 #     committed data-only rod translator (studies/results/h200/rod_source/chain_source, k = 20)
 #     is run on the 256 teacher programs in the rod (float32, GPU) and in the arm identified from
 #     the rod's babbling; the teacher then tracks x_s - (rod - arm) there
-#     (`ccgan.distill --correction-translator`), and the student is distilled from the chain's
-#     CCGAN-GP with the chain's settings, then scored in the rod on held-out programs
+#     (`ccgan.distill --correction-translator`), the student is distilled from the chain's
+#     CCGAN-GP with the chain's settings and scored in the rod on held-out programs
 #     (studies.rod_transfer) beside the uncorrected translator.
-# (b) the aged arm, identified from 50 of its programs of 60 s (studies.identify_targets, with
-#     half and twice D_c's drag for (c)), then a translator taught on the identified arm (k chosen
-#     there among 20, 25, 30), scored on the five shapes beside the privileged aged_sim.
 #
-#   bash tools/device/rod_correction.sh teachers  # corrected teacher + identification -> $OUT
-#   bash tools/device/rod_correction.sh distill   # corrected distill + aged teacher -> $OUT
-#   bash tools/device/rod_correction.sh score     # aged distill + rod_transfer -> $OUT
-#   bash tools/device/rod_correction.sh shapes    # the five shapes once (rod; aged) -> $OUT
+#   bash tools/device/rod_correction.sh identify       # 3 media at once, ~420 s
+#   bash tools/device/rod_correction.sh aged_teacher   # ~245 s
+#   bash tools/device/rod_correction.sh aged_distill   # ~215 s
+#   bash tools/device/rod_correction.sh aged_shapes    # ~90 s
+#   bash tools/device/rod_correction.sh rod_teacher    # the rod's rollouts (kept, ~550 s) then
+#                                                      # the teacher: two calls
+#   bash tools/device/rod_correction.sh rod_distill    # ~340 s
+#   bash tools/device/rod_correction.sh rod_score      # rod_transfer, ~360 s
 #
-# Sequence of `run` calls (nvidia-h200, timeout_s 600), as made on 2026-12-02: carry [".whl"]
-# in the first; each later call within the machine's 30 s idle release, carrying nothing (the
-# warm machine keeps the installed wheels and runs/). Results: studies/results/h200/rod_correction/.
+# Carry [".whl"] in the first call; make each later one within the machine's 30 s idle release,
+# carrying nothing (the warm machine keeps the installed wheels and runs/). Each phase tars what
+# it made into $OUT. As made on 2026-12-02 (one H200): identify ran beside the rod's teacher,
+# whose rollouts took 546 s, so that call hit the limit before the teacher planned (nothing of
+# it was kept then: the correction cache came after); the four aged phases followed. The rod's
+# phases are owed. Results: studies/results/h200/aged_identified/ (its README).
 set -uo pipefail
 source "$(dirname "${BASH_SOURCE[0]}")/install.sh" || exit 1
-phase=${1:?teachers, distill, score or shapes}
+phase=${1:?a phase: see the header}
 RUN=runs/rod_correction
 IDENT_ROD=results/paper/chain_2026-11-28/run/identify_rod/identify.json
 UNCORRECTED=studies/results/h200/rod_source/chain_source
@@ -63,58 +70,69 @@ identify_media() { # aged, half and twice D_c's drag from 50 programs of 60 s, a
   return $status
 }
 
+pack() { # pack NAME PATHS...: a tar of what a phase made, without the big caches
+  local name=$1
+  shift
+  tar -cf "$OUT/$name.tar" --exclude='training_state.npz' --exclude='*.npz' "$@"
+}
+
 case $phase in
-teachers)
-  timed "rod corrected teacher" "$RUN/rod/teacher.out.log" $PY -m ccgan.distill "${ROD[@]}" \
-    --batch-size 32 --teacher-only --out "$RUN/rod/distill" &
-  teacher=$!
+identify)
   identify_media
   status=$?
-  wait $teacher || status=1
-  tar -cf "$OUT/teachers.tar" --exclude='teacher*.npz' --exclude='*.npz' "$RUN"
+  pack identify "$RUN/identify_50"
   exit $status
   ;;
-distill)
-  timed "rod corrected distill" "$RUN/rod/distill.out.log" $PY -m ccgan.distill "${ROD[@]}" \
-    "${TRAIN[@]}" "${SEEDS[@]}" --out "$RUN/rod/distill" &
-  student=$!
+aged_teacher)
   timed "aged identified teacher" "$RUN/aged/teacher.out.log" $PY -m ccgan.distill "${AGED[@]}" \
     --batch-size 32 --teacher-only --out "$RUN/aged/distill"
   status=$?
-  wait $student || status=1
-  tar -cf "$OUT/distill.tar" --exclude='training_state.npz' --exclude='teacher*.npz' \
-    "$RUN"/rod "$RUN"/aged
+  pack aged_teacher "$RUN/aged"
   exit $status
   ;;
-score)
+aged_distill)
   timed "aged identified distill" "$RUN/aged/distill.out.log" $PY -m ccgan.distill "${AGED[@]}" \
-    "${TRAIN[@]}" "${SEEDS[@]}" --start-domain constrained --out "$RUN/aged/distill" &
-  student=$!
+    "${TRAIN[@]}" "${SEEDS[@]}" --start-domain constrained --out "$RUN/aged/distill"
+  status=$?
+  pack aged_distill "$RUN/aged"
+  exit $status
+  ;;
+aged_shapes) # scored once, after the schedule is fixed
+  timed "aged shapes" "$RUN/aged/shapes.out.log" $PY -m eval.shapes --model models/softarm.xml \
+    --target-domain aged --methods none stretch ccgan_sim ccgan_ident --no-robustness \
+    --ccgan-sim-path "$AGED_SIM/translator.ckpt" \
+    --identified-path "$RUN/aged/distill/translator.ckpt" --out "$RUN/aged/shapes"
+  status=$?
+  pack aged_shapes "$RUN/aged/shapes" "$RUN/aged/shapes.out.log"
+  exit $status
+  ;;
+rod_teacher) # stopped at the limit, it keeps the rod's rollouts (teacher_correction.npz): rerun
+  timed "rod corrected teacher" "$RUN/rod/teacher.out.log" timeout 560 $PY -m ccgan.distill \
+    "${ROD[@]}" --batch-size 32 --teacher-only --out "$RUN/rod/distill"
+  status=$?
+  pack rod_teacher "$RUN/rod"
+  exit $status
+  ;;
+rod_distill)
+  timed "rod corrected distill" "$RUN/rod/distill.out.log" $PY -m ccgan.distill "${ROD[@]}" \
+    "${TRAIN[@]}" "${SEEDS[@]}" --out "$RUN/rod/distill"
+  status=$?
+  pack rod_distill "$RUN/rod"
+  exit $status
+  ;;
+rod_score) # held-out programs only; the five shapes wait for a win here
   mkdir -p "$RUN/study"
   timed "rod_transfer" "$RUN/study/rod_transfer.log" $PY -m studies.rod_transfer \
     --n-shape-like 4 --n-other 2 --out "$RUN/study/rod_transfer" --translators \
     "uncorrected=$(echo "$UNCORRECTED"/translator_seed{0,1,2}.ckpt | tr ' ' ,)" \
     "corrected=$(echo "$RUN"/rod/distill/translator_seed{0,1,2}.ckpt | tr ' ' ,)"
   status=$?
-  wait $student || status=1
-  tar -cf "$OUT/score.tar" --exclude='training_state.npz' --exclude='teacher*.npz' \
-    "$RUN"/aged "$RUN/study"
-  exit $status
-  ;;
-shapes) # scored once, after the schedule is fixed: the rod (if the corrected one won) and aged
-  timed "rod shapes" "$OUT/rod_shapes.log" $PY -m eval.shapes --simulator rod \
-    --model models/softarm.xml --methods none stretch ccgan_ident --no-robustness \
-    --identified-path "$RUN/rod/distill/translator.ckpt" --out "$OUT/shapes_rod_corrected" &
-  rod=$!
-  timed "aged shapes" "$OUT/aged_shapes.log" $PY -m eval.shapes --model models/softarm.xml \
-    --target-domain aged --methods none stretch ccgan_sim ccgan_ident --no-robustness \
-    --ccgan-sim-path "$AGED_SIM/translator.ckpt" \
-    --identified-path "$RUN/aged/distill/translator.ckpt" --out "$OUT/shapes_aged_identified"
-  status=$?
-  wait $rod || status=1
+  pack rod_score "$RUN/study"
   exit $status
   ;;
 *)
-  echo "unknown phase $phase: teachers, distill, score or shapes" && exit 2
+  echo "unknown phase $phase: identify, aged_teacher, aged_distill, aged_shapes, rod_teacher," \
+    "rod_distill or rod_score"
+  exit 2
   ;;
 esac
