@@ -5,11 +5,13 @@ One step of iterative learning control corrects the teacher's targets by d(u0) =
 arm(u0), the tip difference between the reference rod and the arm identified from its babbling
 along the correction translator's commands u0, and the new translator's commands u1 then meet
 d(u1) in the rod. The step helps as far as d(u1) is d(u0): here both are measured, u0 and u1 the
-commands of two translators that hold the same k, on held-out programs of each family
+commands of two translators that hold the same k, and of stretch only (the D_s program held
+k periods: commands far from u0's), on held-out programs of each family
 (`studies.rod_transfer.programs_by_family`, never a test shape). Each translator reads the
 chain's D_s path (what the correction's teacher tracks). Reported per family (cm, RMS over
-programs and kept poses): |d(u0)|, |d(u1)| and |d(u1) - d(u0)|, the error left in the rod if
-the arm traced the corrected target exactly.
+programs and kept poses): |d(u0)|, |d(u)| and |d(u) - d(u0)| (the error left in the rod if the
+arm traced the corrected target exactly), beside |arm(u) - arm(u0)|, how far apart the two
+commands' paths are.
 
     python -m studies.correction_transfer --teach-domain \\
         results/paper/chain_2026-11-28/run/identify_rod/identify.json \\
@@ -38,13 +40,6 @@ def rms_cm(difference: np.ndarray) -> float:
     return float(100 * np.sqrt(np.mean(np.sum(difference[..., :3] ** 2, -1))))
 
 
-def model_error(rod_c, arm_c, commands: np.ndarray, k: int) -> np.ndarray:
-    """d = rod - arm [N, T, 6] at every k-th period of commands [N, T * k, 3] (bar)."""
-    return (
-        rod_c.rollout(commands)[:, k - 1 :: k] - arm_c.rollout(commands, backend="c")[:, k - 1 :: k]
-    )
-
-
 def main(argv=None) -> None:
     p = cli_parser("studies.correction_transfer", __doc__)
     p.add_argument("--teach-domain", required=True, help="the identified arm's Domain file")
@@ -71,10 +66,15 @@ def main(argv=None) -> None:
     programs, families = programs_by_family(a.n_shape_like, a.n_other, a.duration_s)
     x_s = arm_s.rollout(programs, backend="c")
     k = u0_tr.k
-    d = {}
-    for name, tr in (("u0", u0_tr), ("u1", u1_tr)):
-        commands = np.stack([tr.translate(q, x)[0] for q, x in zip(programs, x_s, strict=True)])
-        d[name] = model_error(rod_c, arm_c, commands, k)
+    commands_of = {
+        name: np.stack([tr.translate(q, x)[0] for q, x in zip(programs, x_s, strict=True)])
+        for name, tr in (("u0", u0_tr), ("u1", u1_tr))
+    }
+    commands_of["stretch"] = np.repeat(programs, k, axis=1)  # the D_s program held k periods
+    d, in_arm = {}, {}
+    for name, commands in commands_of.items():
+        in_arm[name] = arm_c.rollout(commands, backend="c")[:, k - 1 :: k]
+        d[name] = rod_c.rollout(commands)[:, k - 1 :: k] - in_arm[name]
         print(
             f"{name}: {len(programs)} programs in the rod and the arm"
             f" ({time.perf_counter() - t0:.0f} s)"
@@ -84,27 +84,32 @@ def main(argv=None) -> None:
         groups[family] = np.flatnonzero(np.asarray(families) == family)
     rows = {}
     for group, idx in groups.items():
-        d0, d1 = d["u0"][idx], d["u1"][idx]
-        rows[group] = {
-            "n": int(len(idx)),
-            "d_u0_cm": rms_cm(d0),
-            "d_u1_cm": rms_cm(d1),
-            "d_u1_minus_d_u0_cm": rms_cm(d1 - d0),
-        }
+        rows[group] = {"n": int(len(idx))}
+        for other in ("u1", "stretch"):
+            rows[group] |= {
+                f"d_{other}_cm": rms_cm(d[other][idx]),
+                f"d_{other}_minus_d_u0_cm": rms_cm(d[other][idx] - d["u0"][idx]),
+                f"arm_{other}_minus_arm_u0_cm": rms_cm(in_arm[other][idx] - in_arm["u0"][idx]),
+            }
+        rows[group]["d_u0_cm"] = rms_cm(d["u0"][idx])
     lines = [
         "",
         f"Tip differences rod - arm (cm, RMS over programs and every k-th pose, k = {k}), the"
         f" rod in {a.target_domain} ({a.dtype}), the arm identified ({a.teach_domain}):"
         f" {a.duration_s:g} s programs; u0 {a.u0}, u1 {a.u1}.",
         "",
-        "| family | programs | d(u0) | d(u1) | d(u1) - d(u0) | left / d(u1) |",
-        "|---|---|---|---|---|---|",
+        "u: the commands; arm(u), rod(u): the tip path each traces; d(u) = rod(u) - arm(u).",
+        "",
+        "| family | programs | d(u0) | d(u1) | d(u1) - d(u0) | arm(u1) - arm(u0) |"
+        " d(stretch) | d(stretch) - d(u0) | arm(stretch) - arm(u0) |",
+        "|---|---|---|---|---|---|---|---|---|",
     ]
     for group, row in rows.items():
         lines.append(
             f"| {group} | {row['n']} | {row['d_u0_cm']:.3f} | {row['d_u1_cm']:.3f} |"
-            f" {row['d_u1_minus_d_u0_cm']:.3f} |"
-            f" {row['d_u1_minus_d_u0_cm'] / row['d_u1_cm']:.2f} |"
+            f" {row['d_u1_minus_d_u0_cm']:.3f} | {row['arm_u1_minus_arm_u0_cm']:.3f} |"
+            f" {row['d_stretch_cm']:.3f} | {row['d_stretch_minus_d_u0_cm']:.3f} |"
+            f" {row['arm_stretch_minus_arm_u0_cm']:.3f} |"
         )
     result = {"k": k, "families": families, "rows": rows, "wall_s": time.perf_counter() - t0}
     print("\n".join(lines))
