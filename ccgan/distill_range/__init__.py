@@ -29,6 +29,12 @@ teacher the same way, and training keeping the best iterate so far (as `ccgan.di
     python -m ccgan.distill_range --out DIR            # the range on one GPU (PAPER_SETTINGS)
     python -m ccgan.distill_range --out DIR --quick    # a few minutes on a CPU, to try the path
 
+The teacher can be planned in parts at once on one GPU (the tracker is latency-bound), each
+part the media of some k, then read by the run that trains:
+
+    python -m ccgan.distill_range --out DIR/part0 --teacher-ks 60 5 &    # ... one per part
+    python -m ccgan.distill_range --out DIR/range --teacher-from DIR/part0 DIR/part1 ...
+
 Any flag overrides its preset (e.g. --n-media 32 --epochs 900). Then:
 
     import ccgan, mjx_arm
@@ -112,6 +118,7 @@ def distill_range(
     on_validation=None,
     stop: threading.Event | None = None,
     resume: Path | None = None,
+    teacher_from: tuple[Path, ...] = (),
 ) -> tuple[list[dict], dict]:
     """Trains each conditioned translator's G_c to reproduce the teacher's commands over media.
 
@@ -123,6 +130,7 @@ def distill_range(
       media_range: the range recorded with them: the condition's scaling.
       config: settings (as `ccgan.distill`'s; n_train etc. per medium, teacher_backend "mjx").
       cache, on_validation, stop, resume: as `ccgan.distill.distill`'s.
+      teacher_from: caches of teacher parts (`teacher_over_media`'s) to start from.
 
     Returns:
       (best G_c parameters per translator, history: "train_loss" [epochs, S], "val" {epoch:
@@ -134,7 +142,10 @@ def distill_range(
     t0 = time.perf_counter()
     translators = with_generator_unroll(translators, config.generator_unroll)
     should_stop = _stop_check(config, t0, stop)
-    teacher = teacher_over_media(config, training, arm_s, arm_c, cache, log, progress, should_stop)
+    teacher = teacher_over_media(
+        config, training, arm_s, arm_c, cache, log, progress, should_stop,
+        teacher_from=teacher_from,
+    )  # fmt: skip
     data = range_data(teacher, training, media_range, translators[0].bounds, config.window_s)
     step, stacked, opt_state = init_imitation(translators, config, data)
     score_arms = [
@@ -195,11 +206,26 @@ def main(argv: list[str] | None = None) -> None:
     write = cli.writer(out, sources, translators, a.seeds, media_range, arm_c.model_hash, run)
     stop = threading.Event()
     previous = signal.signal(signal.SIGTERM, lambda *_: stop.set())
+    parts = tuple(Path(d) / "teacher.npz" for d in a.teacher_from)
     try:
+        if a.teacher_ks:  # a part of the teacher, then stop
+            ks = sorted({m.k for m in training})
+            if set(a.teacher_ks) - set(ks):
+                p.error(f"--teacher-ks {a.teacher_ks}: the training media's k are {ks}")
+            t0 = time.perf_counter()
+            teacher_over_media(
+                config, training, arm_s, arm_c, out / "teacher.npz", progress=True,
+                should_stop=_stop_check(config, t0, stop), only_ks=tuple(a.teacher_ks),
+                teacher_from=parts,
+            )  # fmt: skip
+            print(
+                f"wrote {out / 'teacher.npz'}: k {a.teacher_ks} ({time.perf_counter() - t0:.0f} s)"
+            )
+            return
         params, history = distill_range(
             translators, arm_s, arm_c, training, media_range, config,
             cache=out / "teacher.npz", on_validation=write, stop=stop,
-            resume=out / "training_state.npz",
+            resume=out / "training_state.npz", teacher_from=parts,
         )  # fmt: skip
     except mpc_mjx.TrackingStopped as err:
         print(f"teacher: {err}: rerun the same command to go on", file=sys.stderr)

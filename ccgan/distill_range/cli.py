@@ -80,6 +80,24 @@ def build_parser(doc: str = __doc__) -> argparse.ArgumentParser:
         " the one-GPU settings (PAPER_SETTINGS). A preset goes before the flags given, which"
         " override it: the defaults shown below are the fields' own, under the preset",
     )
+    p.add_argument(
+        "--teacher-ks",
+        type=int,
+        nargs="+",
+        default=[],
+        metavar="K",
+        help="plan only the media of these k into --out/teacher.npz and stop: a part, so that"
+        " processes planning different k run at once on one GPU (the tracker is latency-bound);"
+        " the run that trains reads the parts with --teacher-from",
+    )
+    p.add_argument(
+        "--teacher-from",
+        nargs="+",
+        default=[],
+        metavar="DIR",
+        help="folders of parts (runs with --teacher-ks and the same settings) whose teacher.npz"
+        " shards join --out's before anything is planned; one planned otherwise is skipped",
+    )
     add_config_flags(p, RangeConfig)
     add_config_flags(p, DistillConfig, skip=FIXED)
     return p

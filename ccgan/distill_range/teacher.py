@@ -21,7 +21,14 @@ from pathlib import Path
 import numpy as np
 
 from ccgan.distill.config import DistillConfig
-from ccgan.distill.teacher import _programs, _read_cache, _splits, planner_config
+from ccgan.distill.teacher import (
+    _programs,
+    _read_cache,
+    _splits,
+    key_differences,
+    planner_config,
+    read_cache_key,
+)
 from ccgan.distill_range.media import Medium
 from mjx_arm.atomic import write_atomically
 from mjx_arm.identify_family import DomainFamily, resolved_viscosity_scale
@@ -71,6 +78,22 @@ def media_theta(arm_c, media: list[Medium], medium: np.ndarray) -> np.ndarray:
     return per_medium[medium]
 
 
+def read_part(path: Path, key: str, log=print) -> dict[str, np.ndarray]:
+    """The arrays of another run's teacher cache `path` when it was planned under `key`; else
+    {} and a line saying why (missing, unreadable, or the differing fields). Unlike this run's
+    own cache, a part is never moved or rewritten: it is another run's file."""
+    try:
+        stored = read_cache_key(path)
+    except ValueError as err:
+        log(f"teacher: {err}; not used")
+        return {}
+    if stored != key:
+        log(f"teacher: {path} was planned otherwise ({key_differences(stored, key)}); not used")
+        return {}
+    with np.load(path) as f:
+        return {name: f[name] for name in f.files if name != "key"}
+
+
 def _shards(indices: np.ndarray, size: int) -> list[np.ndarray]:
     """`indices` cut into pieces of `size` (0: one piece)."""
     if size == 0 or len(indices) <= size:
@@ -87,8 +110,17 @@ def teacher_over_media(
     log=print,
     progress: bool = False,
     should_stop=None,
+    only_ks: tuple[int, ...] = (),
+    teacher_from: tuple[Path, ...] = (),
 ) -> dict[str, np.ndarray]:
     """Programs, D_s targets and the teacher's commands, every program in its medium.
+
+    The MJX tracker is bound by its steps' latency, so processes planning different k at once on
+    one GPU take about as long as one (two per-pair teachers at once: 197 and 200 s against
+    about 200 alone, `studies/results/h200/rod_source/`). `only_ks` plans only the media of
+    those k (a part: their commands are the only ones filled in); `teacher_from` reads the
+    parts' caches (other runs' teacher.npz, each planned under this run's key), whose entries
+    join this run's cache before anything is planned.
 
     Args:
       config: the settings (`teacher_backend` must be "mjx": only the MJX tracker plans many
@@ -99,20 +131,37 @@ def teacher_over_media(
       cache: the teacher.npz to read and write (None: none).
       should_stop: called between chunks; True stops the tracker (`TrackingStopped`), its
         progress kept beside the cache.
+      only_ks: plan only the media of these k (empty: every k).
+      teacher_from: other caches of this key to take planned shards from (one of another key,
+        or unreadable, is reported and skipped).
 
     Returns:
       {"p" [N, T, 3] bar, "x" [N, T, 6] (m, unit d3), "c" [N, T, 3] bar (the teacher's
       command per source step, held k periods), "medium" [N] int, "is_val" [N] bool}.
 
     Raises:
-      ValueError: `config.teacher_backend` is not "mjx".
+      ValueError: `config.teacher_backend` is not "mjx", or `only_ks` holds a k no medium has.
       TrackingStopped: `should_stop` said so.
     """
     if config.teacher_backend != "mjx":
         raise ValueError(f"the teacher over media plans in MJX, got {config.teacher_backend!r}")
     programs, medium, is_val = range_programs(config, len(media))
     key = range_teacher_key(config, media, arm_c)
+    ks = sorted({m.k for m in media})
+    if set(only_ks) - set(ks):
+        raise ValueError(f"only_ks {sorted(only_ks)}: the media's k are {ks}")
     store = {} if cache is None else _read_cache(cache, key, log)
+    joined = []
+    for other in teacher_from:
+        found = read_part(Path(other), key, log)
+        new = sorted(name for name in found if name not in store)
+        store.update({name: found[name] for name in new})
+        joined += [f"{name} from {other}" for name in new if name.startswith("c_k")]
+    if joined:
+        log(f"teacher: {', '.join(joined)}")
+        if cache is not None:
+            cache.parent.mkdir(parents=True, exist_ok=True)
+            write_atomically(cache, lambda f: np.savez_compressed(f, key=key, **store))
     if "x" in store:
         targets = store["x"]
     else:
@@ -126,7 +175,9 @@ def teacher_over_media(
     planned_before = sorted(name for name in store if name.startswith("c_k"))
     if planned_before:
         log(f"teacher: {', '.join(planned_before)} read from {cache}")
-    for k in sorted({m.k for m in media}):
+    for k in ks:
+        if only_ks and k not in only_ks:
+            continue
         of_k = np.flatnonzero(np.isin(medium, [i for i, m in enumerate(media) if m.k == k]))
         for piece, shard in enumerate(_shards(of_k, config.teacher_shard)):
             name = f"c_k{k}_{piece}"

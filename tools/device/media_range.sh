@@ -1,0 +1,66 @@
+#!/usr/bin/env bash
+# Runs ON THE GPU MACHINE (the device tool's `run`), from the repository root of the copy sent
+# there: issue 51's translator over the range of media (`python -m ccgan.distill_range`, its
+# one-GPU settings), its teacher in four parts at once on the one GPU.
+#
+#   bash tools/device/media_range.sh teacher   # 4 parts at once (--teacher-ks), ~6 min
+#   bash tools/device/media_range.sh distill   # the training run, reading the parts; SIGTERM at
+#                                              # 550 s, so rerun it until it ends (exit 0)
+#   bash tools/device/media_range.sh score     # eval.media_range on held-out programs
+#
+# The default sample's 24 training media take k in {5, 10, 15, 20, 25, 30, 40, 50, 60}
+# (measured in MuJoCo C on the 2-core AMD EPYC, 2026-12-02); the MJX tracker is bound by its
+# steps' latency, so a part's time grows with the sum of its k plus one compile per k. The
+# parts below hold 65, 65, 65 and 60 of the 255. Carry [".whl"] in the first call and make
+# each later one within the machine's 30 s idle release (the warm machine keeps runs/). Not yet
+# run: docs/media_range.md, "What is owed".
+set -uo pipefail
+source "$(dirname "${BASH_SOURCE[0]}")/install.sh" || exit 1
+phase=${1:?teacher, distill or score}
+RUN=runs/media_range
+PARTS=("60 5" "50 15" "40 25" "30 20 10")
+export XLA_PYTHON_CLIENT_PREALLOCATE=false # processes share the GPU
+echo "$(nproc) cores; $(nvidia-smi -L 2>/dev/null | head -1)"
+mkdir -p "$RUN"
+
+case $phase in
+teacher)
+  pids=() status=0 t0=$SECONDS
+  for i in "${!PARTS[@]}"; do
+    # shellcheck disable=SC2086 # each part's k, word-split on purpose
+    $PY -m ccgan.distill_range --out "$RUN/part$i" --teacher-ks ${PARTS[$i]} \
+      >"$RUN/part$i.log" 2>&1 &
+    pids+=($!)
+  done
+  for pid in "${pids[@]}"; do wait "$pid" || status=1; done
+  for i in "${!PARTS[@]}"; do echo "== part $i (k ${PARTS[$i]})" && tail -n 3 "$RUN/part$i.log"; done
+  echo "teacher parts: wall $((SECONDS - t0)) s"
+  tar -cf "$OUT/teacher.tar" "$RUN"/part*.log
+  exit $status
+  ;;
+distill)
+  t0=$SECONDS
+  timeout -s TERM 550 $PY -m ccgan.distill_range --out "$RUN/range" \
+    --teacher-from "$RUN"/part{0,1,2,3} >"$RUN/range.log" 2>&1
+  status=$?
+  tail -n 4 "$RUN/range.log"
+  echo "distill: rc $status, wall $((SECONDS - t0)) s (143: stopped, rerun to go on)"
+  tar -cf "$OUT/distill.tar" --exclude='*.npz' "$RUN/range" "$RUN/range.log"
+  exit $status
+  ;;
+score)
+  mkdir -p "$RUN/score"
+  $PY -m eval.media_range --translators "$RUN"/range/translator_seed{0,1,2}.ckpt \
+    --out "$RUN/score/media_range" \
+    --reference 10 1 results/paper/rerun_2026-11-27/run/ccgan_sim/translator.ckpt \
+    --reference 10 0.7 results/paper/rerun_2026-11-27/run/aged_sim/translator.ckpt \
+    >"$RUN/score.log" 2>&1
+  status=$?
+  tail -n 20 "$RUN/score.log"
+  tar -cf "$OUT/score.tar" "$RUN/score" "$RUN/score.log"
+  exit $status
+  ;;
+*)
+  echo "unknown phase $phase: teacher, distill or score" && exit 2
+  ;;
+esac
