@@ -29,13 +29,15 @@ teacher)
   for i in "${!PARTS[@]}"; do
     # shellcheck disable=SC2086 # each part's k, word-split on purpose
     $PY -m ccgan.distill_range --out "$RUN/part$i" --teacher-ks ${PARTS[$i]} \
-      >"$RUN/part$i.log" 2>&1 &
+      >"$OUT/part$i.log" 2>&1 & # in $OUT: a call stopped at its limit still returns them
     pids+=($!)
   done
   for pid in "${pids[@]}"; do wait "$pid" || status=1; done
-  for i in "${!PARTS[@]}"; do echo "== part $i (k ${PARTS[$i]})" && tail -n 3 "$RUN/part$i.log"; done
+  for i in "${!PARTS[@]}"; do
+    echo "== part $i (k ${PARTS[$i]})" && grep -a "teacher (mjx)\|wrote\|media:" "$OUT/part$i.log"
+    cp "$OUT/part$i.log" "$RUN/"
+  done
   echo "teacher parts: wall $((SECONDS - t0)) s"
-  tar -cf "$OUT/teacher.tar" "$RUN"/part*.log
   exit $status
   ;;
 distill)
