@@ -87,3 +87,14 @@ def test_the_cli_refuses_a_part_of_a_k_no_medium_has(tmp_path, capsys):
         main(["--out", str(tmp_path / "part"), "--quick", "--teacher-ks", "7"])
     assert exit_info.value.code == 2
     assert "--teacher-ks [7]: the training media's k are [5, 10]" in capsys.readouterr().err
+
+
+def test_the_one_gpu_settings_parse_with_a_batch_over_all_media(tmp_path):
+    """PAPER_SETTINGS train 80 programs per step over 24 media of 10 + 10: the batch is checked
+    against all of them, not one medium's 20 (which refused the default command)."""
+    from ccgan.distill_range import cli
+
+    _, _, range_config, config = cli.parse(["--out", str(tmp_path / "r")])
+    assert config.batch_size == 80 and config.train_sets == range_config.n_media == 24
+    with pytest.raises(SystemExit):
+        cli.parse(["--out", str(tmp_path / "s"), "--n-media", "3"])  # 80 > 3 x 20

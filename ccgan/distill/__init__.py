@@ -29,6 +29,7 @@ import numpy as np
 import mjx_arm  # noqa: F401  (before jax: sets the XLA CPU flag)
 from ccgan.cli import config_from_args
 from ccgan.distill.cli import (
+    PAIR_FIXED,
     adopt_teacher_from,
     build_parser,
     check_teacher_from,
@@ -176,7 +177,7 @@ def main(argv=None) -> None:
     a = p.parse_args(argv)
     if not a.translators and not a.teacher_only:
         p.error("--translators is required (only --teacher-only plans without translators)")
-    config = config_from_args(p, a, DistillConfig)
+    config = config_from_args(p, a, DistillConfig, skip=PAIR_FIXED)
     if not a.translators and config.hold_factor == 0 and not config.k_candidates:
         p.error("--teacher-only without --translators needs --hold-factor (k) or --k-candidates")
     check_teacher_from(p, a)

@@ -70,6 +70,8 @@ from ccgan.stage import Stage, common_k, stage_parser
 from ccgan.translator import TAUGHT_DOMAIN
 from mjx_arm import domains
 
+#: DistillConfig fields without a flag here: a pair trains on one set of training splits.
+PAIR_FIXED = ("train_sets",)
 #: The method of a distilled file whose start translators are CCGAN-GP's; other starts give
 #: f"{DISTILLED}_from_<their method>" (`ccgan.translator.METHODS` lists them).
 DISTILLED = "distill"
@@ -78,7 +80,7 @@ DISTILLED = "distill"
 def build_parser() -> argparse.ArgumentParser:
     """The options of `python -m ccgan.distill`."""
     p = stage_parser("ccgan.distill", __doc__, translators_required=False)
-    add_config_flags(p, DistillConfig)
+    add_config_flags(p, DistillConfig, skip=PAIR_FIXED)
     p.add_argument(
         "--teacher-only",
         action="store_true",

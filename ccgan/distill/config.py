@@ -104,6 +104,10 @@ class DistillConfig:
     translator meant for an arm whose D_s paths are the rod's. The translator is asked to make
     the target trace its own arm's D_s path; taught on the chain's, it inherits the chain's D_s
     model error (1.3-6.4% of L on the five shapes, `results/fidelity.md`)."""
+    train_sets: int = 1
+    """How many sets of the training splits the run trains on: 1 for a pair; one per training
+    medium in `ccgan.distill_range` (set there from --n-media: no flag). batch_size may be at
+    most their programs in all."""
     correction_translator: str = ""
     """A translator file whose commands, run on the target (the reference rod in
     `correction_domain`) and in the arm the teacher plans in, correct the teacher's targets: one
@@ -147,6 +151,7 @@ class DistillConfig:
                 "generator_unroll": 1,
                 "final_lr_factor": 0,
                 "k_choice_seconds": period,
+                "train_sets": 1,
             },
             above={"head_weight": 0, "learning_rate": 0},
         )
@@ -171,11 +176,13 @@ class DistillConfig:
             raise ConfigError(
                 "horizon_steps", f"must be 1 with teacher_backend 'mjx', got {self.horizon_steps}"
             )
-        if self.batch_size > self.n_train_programs:
+        if self.batch_size > self.n_train_programs * self.train_sets:
+            per_set = "" if self.train_sets == 1 else f" per medium x {self.train_sets} media"
             raise ConfigError(
                 "batch_size",
-                f"must be <= n_train + n_train_full + n_train_babble = {self.n_train_programs}"
-                f" training programs, got {self.batch_size}",
+                f"must be <= n_train + n_train_full + n_train_babble{per_set} ="
+                f" {self.n_train_programs * self.train_sets} training programs, got"
+                f" {self.batch_size}",
             )
         if self.k_candidates:
             check_ints("k_candidates", self.k_candidates, 1)

@@ -217,6 +217,11 @@ def _resume_key(config: DistillConfig, k: int, start_params) -> str:
     if not config.k_candidates:  # the same: k set or the translators' own
         settings.pop("k_candidates")
         settings.pop("k_choice_seconds")
+    if not config.correction_translator:  # the same: no correction from the target's rollouts
+        for name in ("correction_translator", "correction_domain", "correction_dtype"):
+            settings.pop(name)
+    if config.train_sets == 1:  # the same: one pair
+        settings.pop("train_sets")
     h.update(json.dumps(settings, sort_keys=True).encode())
     for leaf in jax.tree.leaves(start_params):
         h.update(np.ascontiguousarray(np.asarray(leaf)).tobytes())

@@ -55,6 +55,9 @@ QUICK_SETTINGS = (
 #: DistillConfig fields without a flag here: k is the rule's per medium (not set, not chosen
 #: among candidates), the teacher is the MJX tracker, which plans one step ahead.
 FIXED = ("hold_factor", "k_candidates", "k_choice_seconds", "teacher_backend", "horizon_steps")
+#: DistillConfig fields set here from the range, without a flag: one set of training splits
+#: per training medium.
+FROM_RANGE = ("train_sets",)
 
 
 def build_parser(doc: str = __doc__) -> argparse.ArgumentParser:
@@ -99,7 +102,7 @@ def build_parser(doc: str = __doc__) -> argparse.ArgumentParser:
         " shards join --out's before anything is planned; one planned otherwise is skipped",
     )
     add_config_flags(p, RangeConfig)
-    add_config_flags(p, DistillConfig, skip=FIXED)
+    add_config_flags(p, DistillConfig, skip=FIXED + FROM_RANGE)
     return p
 
 
@@ -112,6 +115,7 @@ def parse(argv: list[str] | None, doc: str = __doc__):
     p = build_parser(doc)
     a = p.parse_args((QUICK_SETTINGS if "--quick" in argv else PAPER_SETTINGS) + argv)
     range_config = config_from_args(p, a, RangeConfig)
+    a.train_sets = range_config.n_media  # n_train etc. are per medium
     config = config_from_args(p, a, DistillConfig, skip=FIXED)
     config = dataclasses.replace(config, teacher_backend="mjx")
     if a.seeds is not None and len(a.seeds) != len(a.translators):
