@@ -53,8 +53,8 @@ def main(argv=None) -> None:
     p.add_argument("--duration-s", type=float, default=60.0)
     p.add_argument("--out", required=True, help="output prefix (writes .json and .md)")
     a = parse_checked_args(p, argv)
-    if a.n_shape_like < 0 or a.n_other < 0 or a.n_shape_like + a.n_other == 0:
-        p.error("--n-shape-like and --n-other must be >= 0, not both 0")
+    if a.n_shape_like < 1 or a.n_other < 0 or a.duration_s <= 0:
+        p.error("--n-shape-like must be >= 1, --n-other >= 0 and --duration-s > 0")
     u0_tr, u1_tr = load_translator(a.u0), load_translator(a.u1)
     if u0_tr.k != u1_tr.k:
         p.error(f"--u0 holds k = {u0_tr.k}, --u1 k = {u1_tr.k}: they must hold the same k")

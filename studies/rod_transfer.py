@@ -69,7 +69,10 @@ def programs_by_family(
     babble = BabbleConfig(seed=seed, duration_s=duration_s)
     babbling = babble_programs(babble, np.arange(n_other), domain="distill", split="val")
     held = [held_program(HELD_SEED0 + i, duration_s, (10, 40)) for i in range(n_other)]
-    programs = np.concatenate([shape_like, babbling.astype(np.float64), np.stack(held)])
+    held = np.stack(held) if held else np.zeros((0, *shape_like.shape[1:]))
+    programs = np.concatenate(
+        [shape_like, babbling.astype(np.float64).reshape(-1, *held.shape[1:]), held]
+    )
     return programs, kinds + ["babbling"] * n_other + ["held"] * n_other
 
 
