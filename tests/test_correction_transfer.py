@@ -30,3 +30,20 @@ def test_translators_of_different_k_are_refused(tmp_path):
     argv = ["--teach-domain", IDENTIFIED, "--u0", U0, "--u1", other_k, "--out", str(tmp_path / "x")]
     with pytest.raises(SystemExit):
         correction_transfer.main(argv)
+
+
+def test_the_corrected_teachers_are_scored_in_the_rod_beside_stretch_only(tmp_path):
+    from studies import correction_teacher
+
+    out = tmp_path / "teacher"
+    argv = ["--teach-domain", IDENTIFIED, "--u0", U0, "--out", str(out), "--n-other", "0"]
+    correction_teacher.main([*argv, "--duration-s", "1"])
+    result = json.loads(out.with_suffix(".json").read_text())
+    row = result["rows"]["all"]
+    names = ["stretch", "u0 (translator)", "teacher x_chain", "teacher x_chain - d0"]
+    assert set(row) == {"n", *names, "teacher x_rod - d0"} and row["n"] == 2
+    per_program = result["per_program_x_err_cm"]
+    for name in names:
+        assert abs(row[name] - sum(per_program[name]) / 2) < 1e-12  # the mean of its programs
+    # The uncorrected teacher meets its own target in the arm, the corrected ones theirs.
+    assert all(e < row["stretch"] for e in result["teacher_x_err_in_arm_cm"]["teacher x_chain"])
