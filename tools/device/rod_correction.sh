@@ -8,10 +8,10 @@
 # (d) the rod: one step of iterative learning control for the data-only translator. The
 #     committed data-only rod translator (studies/results/h200/rod_source/chain_source, k = 20)
 #     is run on the 256 teacher programs in the rod (float32, GPU) and in the arm identified from
-#     the rod's babbling; the teacher then tracks x_s - (rod - arm) there
-#     (`ccgan.distill --correction-translator`), the student is distilled from the chain's
-#     CCGAN-GP with the chain's settings and scored in the rod on held-out programs
-#     (studies.rod_transfer) beside the uncorrected translator.
+#     the rod's babbling; the teacher then tracks x_s - (rod - arm) there, x_s the rod's own D_s
+#     path (`ccgan.distill --correction-translator --source-simulator rod`); the student is
+#     distilled from the chain's CCGAN-GP with the chain's settings and scored in the rod on
+#     held-out programs (studies.rod_transfer) beside the uncorrected translator.
 #
 #   bash tools/device/rod_correction.sh identify       # 3 media at once, ~420 s
 #   bash tools/device/rod_correction.sh aged_teacher   # ~245 s
@@ -39,8 +39,11 @@ AGED_SIM=results/paper/rerun_2026-11-27/run/aged_sim
 IDENT_AGED=$RUN/identify_50/aged/identify.json
 PROGRAMS=(--duration-s 60 --n-train 120 --n-train-full 120 --n-val 8 --n-val-full 8
   --teacher-shard 256 --window-s 60 --horizon-steps 1 --iterations 1 --teacher-backend mjx)
+# The teacher tracks the rod's own D_s path, corrected: the better of the two corrected
+# teachers in the rod on held-out programs (studies/results/cpu/correction_teacher/).
 ROD=(--model models/softarm.xml --domain constrained --teach-domain "$IDENT_ROD" --hold-factor 20
-  "${PROGRAMS[@]}" --teacher-substeps 2 --correction-translator "$UNCORRECTED/translator_seed0.ckpt")
+  "${PROGRAMS[@]}" --teacher-substeps 2 --correction-translator "$UNCORRECTED/translator_seed0.ckpt"
+  --source-simulator rod)
 AGED=(--model models/softarm.xml --domain aged --teach-domain "$IDENT_AGED" --k-candidates 20 25 30
   "${PROGRAMS[@]}" --teacher-substeps 5)
 TRAIN=(--batch-size 80 --learning-rate 1e-3 --final-lr-factor 0.02 --epochs 1840
