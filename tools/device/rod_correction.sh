@@ -39,8 +39,8 @@ AGED_SIM=results/paper/rerun_2026-11-27/run/aged_sim
 IDENT_AGED=$RUN/identify_50/aged/identify.json
 PROGRAMS=(--duration-s 60 --n-train 120 --n-train-full 120 --n-val 8 --n-val-full 8
   --teacher-shard 256 --window-s 60 --horizon-steps 1 --iterations 1 --teacher-backend mjx)
-# The teacher tracks the rod's own D_s path, corrected: the better of the two corrected
-# teachers in the rod on held-out programs (studies/results/cpu/correction_teacher/).
+# The teacher tracks the rod's own D_s path, corrected: the better of the two corrected teachers
+# in the rod on held-out programs (studies/results/cpu/correction_teacher/correction_teacher_8.md).
 ROD=(--model models/softarm.xml --domain constrained --teach-domain "$IDENT_ROD" --hold-factor 20
   "${PROGRAMS[@]}" --teacher-substeps 2 --correction-translator "$UNCORRECTED/translator_seed0.ckpt"
   --source-simulator rod)
