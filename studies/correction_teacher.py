@@ -19,7 +19,8 @@ rod tables score.
     python -m studies.correction_teacher --teach-domain \\
         results/paper/chain_2026-11-28/run/identify_rod/identify.json \\
         --u0 studies/results/h200/rod_source/chain_source/translator_seed0.ckpt \\
-        --n-shape-like 2 --n-other 2 --out studies/results/cpu/correction_teacher/correction_teacher_8
+        --n-shape-like 2 --n-other 2 \\
+        --out studies/results/cpu/correction_teacher/correction_teacher_8
 """
 
 from __future__ import annotations
