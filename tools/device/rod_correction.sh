@@ -113,6 +113,9 @@ rod_teacher) # stopped at the limit, it keeps the rod's rollouts (teacher_correc
   timed "rod corrected teacher" "$RUN/rod/teacher.out.log" timeout 560 $PY -m ccgan.distill \
     "${ROD[@]}" --batch-size 32 --teacher-only --out "$RUN/rod/distill"
   status=$?
+  # The rod's rollouts come back too (~7 MB): carried into runs/rod_correction/rod/distill/ of
+  # a fresh machine, they spare the next call its 546 s.
+  cp -f "$RUN/rod/distill/teacher_correction.npz" "$OUT/" 2>/dev/null
   pack rod_teacher "$RUN/rod"
   exit $status
   ;;
