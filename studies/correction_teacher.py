@@ -37,7 +37,7 @@ from ccgan.distill.config import DistillConfig
 from ccgan.distill.teacher import planner_config
 from mjx_arm import domains
 from studies.checks import parse_checked_args
-from studies.rod_transfer import programs_by_family
+from studies.rod_transfer import family_table, programs_by_family
 from tracking import mpc
 from tracking.metrics import position_error_cm
 
@@ -83,9 +83,6 @@ def main(argv=None) -> None:
         name: position_error_cm(rod_c.rollout(u)[:, k - 1 :: k], x_rod).mean(-1)
         for name, u in commands.items()
     }
-    groups = {"all": np.arange(len(programs))}
-    for family in dict.fromkeys(families):
-        groups[family] = np.flatnonzero(np.asarray(families) == family)
     cols = list(errors)
     lines = [
         "",
@@ -102,10 +99,9 @@ def main(argv=None) -> None:
         ) + " |",
         "|---|---|" + "---|" * (2 * len(cols) - 1),
     ]  # fmt: skip
-    rows = {}
-    for group, idx in groups.items():
-        rows[group] = {"n": int(len(idx))} | {c: float(errors[c][idx].mean()) for c in cols}
-        row = rows[group]
+    by_family = family_table(families, errors)
+    rows = {"all": by_family.pop("all")} | by_family  # "all" first
+    for group, row in rows.items():
         lines.append(
             f"| {group} | {row['n']} | "
             + " | ".join(f"{row[c]:.3f}" for c in cols)

@@ -3,11 +3,11 @@
 from __future__ import annotations
 
 import dataclasses
-import hashlib
 from pathlib import Path
 
 import mjx_arm  # noqa: F401  (before jax: sets the XLA CPU flag)
 from mjx_arm import arm as mjx_arm_arm
+from mjx_arm.dataset import sha256_file
 from tracking.config import ConfigError, check_fields, check_ints
 
 __all__ = ["ConfigError", "DistillConfig", "SOURCE_SIMULATORS"]
@@ -217,20 +217,8 @@ class DistillConfig:
             key["source_simulator"] = self.source_simulator
         if self.correction_translator:  # uncorrected caches keep their key
             key["correction"] = {
-                "translator_sha256": file_sha256(self.correction_translator),
+                "translator_sha256": sha256_file(Path(self.correction_translator)),
                 "domain": self.correction_domain,
                 "dtype": self.correction_dtype,
             }
         return key
-
-
-def file_sha256(path: str) -> str:
-    """Hex sha256 of a file's bytes (the correction's translator: which commands made it).
-
-    Raises:
-      ValueError: no such file.
-    """
-    try:
-        return hashlib.sha256(Path(path).read_bytes()).hexdigest()
-    except FileNotFoundError:
-        raise ValueError(f"correction_translator {path}: no such file") from None

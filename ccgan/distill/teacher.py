@@ -180,13 +180,11 @@ def cached_corrected_targets(
         + np.ascontiguousarray(targets, np.float64).tobytes()
     ).hexdigest()[:32]
     entries = {}
-    if path.exists():
-        try:
-            with np.load(path) as f:
-                if str(f["key"]) == key:
-                    entries = {name: f[name] for name in f.files if name != "key"}
-        except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile):
-            entries = {}
+    try:
+        if read_cache_key(path) == key:
+            entries = cache_arrays(path)
+    except ValueError:  # none yet, or unreadable: replaced
+        pass
     if f"t_{digest}" in entries:
         log(f"correction: {len(programs)} programs read from {path}")
         return entries[f"t_{digest}"]
@@ -320,7 +318,12 @@ def _read_cache(cache: Path, key: str, log) -> dict[str, np.ndarray]:
         log(f"{cache} was made with other settings ({key_differences(stored, key)}); recomputing")
         set_aside(cache, stored, log)
         return {}
-    with np.load(cache) as f:
+    return cache_arrays(cache)
+
+
+def cache_arrays(path: Path) -> dict[str, np.ndarray]:
+    """Every array of a cache file but its key (read its key first: `read_cache_key`)."""
+    with np.load(path) as f:
         return {name: f[name] for name in f.files if name != "key"}
 
 

@@ -25,6 +25,7 @@ from ccgan.distill.teacher import (
     _programs,
     _read_cache,
     _splits,
+    cache_arrays,
     key_differences,
     planner_config,
     read_cache_key,
@@ -90,8 +91,7 @@ def read_part(path: Path, key: str, log=print) -> dict[str, np.ndarray]:
     if stored != key:
         log(f"teacher: {path} was planned otherwise ({key_differences(stored, key)}); not used")
         return {}
-    with np.load(path) as f:
-        return {name: f[name] for name in f.files if name != "key"}
+    return cache_arrays(path)
 
 
 def _shards(indices: np.ndarray, size: int) -> list[np.ndarray]:
@@ -115,9 +115,10 @@ def teacher_over_media(
 ) -> dict[str, np.ndarray]:
     """Programs, D_s targets and the teacher's commands, every program in its medium.
 
-    The MJX tracker is bound by its steps' latency, so processes planning different k at once on
-    one GPU take about as long as one (two per-pair teachers at once: 197 and 200 s against
-    about 200 alone, `studies/results/h200/rod_source/`). `only_ks` plans only the media of
+    The MJX tracker is bound by its steps' latency, so processes planning different k can share
+    one GPU (two per-pair teachers at once on one H200 took 197 and 200 s,
+    `studies/results/h200/rod_source/`; what that saves against one process is not measured).
+    `only_ks` plans only the media of
     those k (a part: their commands are the only ones filled in); `teacher_from` reads the
     parts' caches (other runs' teacher.npz, each planned under this run's key), whose entries
     join this run's cache before anything is planned.
