@@ -100,6 +100,12 @@ def test_the_corrected_targets_are_kept_beside_the_cache_and_read_back(small_xml
     again = cached_corrected_targets(config, arm_c, programs, targets, 15, "A", cache, logs.append)
     np.testing.assert_array_equal(again, first)
     assert "read from" in logs[-1]
+    # D_s poses that differ in their last bits (another machine's float64 rollouts) hit too
+    noisy = cached_corrected_targets(
+        config, arm_c, programs, targets + 1e-14, 15, "A", cache, logs.append
+    )
+    np.testing.assert_array_equal(noisy, first)
+    assert "read from" in logs[-1]
     other = cached_corrected_targets(config, arm_c, programs, targets, 15, "B", cache, logs.append)
     np.testing.assert_allclose(other, first, atol=1e-12)  # computed again under key B
     assert "read from" not in logs[-1]

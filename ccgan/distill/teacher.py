@@ -178,15 +178,16 @@ def cached_corrected_targets(
     log=print,
 ) -> np.ndarray:
     """`corrected_targets`, read from `correction_path(cache)` when it holds this shard's
-    (the same teacher key, programs and D_s poses: entries are named by their sha256), else
+    (the same teacher key and programs: entries are named by the programs' sha256), else
     computed and added to it. An unreadable file, or one of another key, is replaced."""
     if cache is None:
         return corrected_targets(config, arm_c, programs, targets, k, log)
     path = correction_path(cache)
-    digest = hashlib.sha256(
-        np.ascontiguousarray(programs, np.float64).tobytes()
-        + np.ascontiguousarray(targets, np.float64).tobytes()
-    ).hexdigest()[:32]
+    # Entries are named by the programs alone: their D_s poses follow from them and the key
+    # (which names the source simulator), but not to the bit across machines (the rod's float64
+    # D_s paths of one shard differed by 2e-14 m between two H200 runs, so an entry named by
+    # them was never found again and the 300 s of rollouts were repeated).
+    digest = hashlib.sha256(np.ascontiguousarray(programs, np.float64).tobytes()).hexdigest()[:32]
     entries = {}
     try:
         if read_cache_key(path) == key:
