@@ -26,8 +26,11 @@
 # carrying nothing (the warm machine keeps the installed wheels and runs/). Each phase tars what
 # it made into $OUT. As made on 2026-12-02 (one H200): identify ran beside the rod's teacher,
 # whose rollouts took 546 s, so that call hit the limit before the teacher planned (nothing of
-# it was kept then: the correction cache came after); the four aged phases followed. The rod's
-# phases are owed. Results: studies/results/h200/aged_identified/ (its README).
+# it was kept then: the correction cache came after); the four aged phases followed. Results:
+# studies/results/h200/aged_identified/ (its README). rod_teacher then ran alone in 484 s with
+# the arm's rollouts beside the rod's (studies/results/h200/rod_correction/); rod_distill and
+# rod_score are owed. The tree and .whl leave no room to carry the teacher cache (9.7 MB) to a
+# fresh machine, so run rod_teacher and rod_distill on one warm machine.
 set -uo pipefail
 source "$(dirname "${BASH_SOURCE[0]}")/install.sh" || exit 1
 phase=${1:?a phase: see the header}
@@ -114,7 +117,7 @@ rod_teacher) # stopped at the limit, it keeps the rod's rollouts (teacher_correc
     "${ROD[@]}" --batch-size 32 --teacher-only --out "$RUN/rod/distill"
   status=$?
   # The rod's rollouts come back too (~7 MB): carried into runs/rod_correction/rod/distill/ of
-  # a fresh machine, they spare the next call its 546 s.
+  # a fresh machine, they spare the next call its ~290 s of rollouts.
   cp -f "$RUN/rod/distill/teacher_correction.npz" "$OUT/" 2>/dev/null
   pack rod_teacher "$RUN/rod"
   exit $status
