@@ -135,7 +135,8 @@ def corrected_targets(
     t_translate = time.perf_counter() - t0
     # The arm's MuJoCo C rollouts run on the host's cores while the rod runs (on the GPU where
     # there is one): mujoco.rollout releases the GIL, so the two take the longer one's time,
-    # not their sum (the arm's were about 95 s of the 546 s on one H200 for 256 programs).
+    # not their sum (256 programs of 1,200 s on one H200: the rod 134 s, the arm about 300 s;
+    # studies/results/h200/rod_correction/rod_teacher.log).
     with ThreadPoolExecutor(max_workers=1) as pool:
         arm_future = pool.submit(arm_c.rollout, commands, backend="c")
         rod = mjx_arm.load_rod(config.correction_domain, dtype=config.correction_dtype)
