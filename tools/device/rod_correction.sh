@@ -20,7 +20,8 @@
 #   bash tools/device/rod_correction.sh rod_teacher    # the rod's rollouts (kept, ~550 s) then
 #                                                      # the teacher: two calls
 #   bash tools/device/rod_correction.sh rod_distill    # ~340 s
-#   bash tools/device/rod_correction.sh rod_score      # rod_transfer, ~360 s
+#   bash tools/device/rod_correction.sh rod_score      # rod_transfer, ~230 s
+#   bash tools/device/rod_correction.sh rod_shapes     # the five shapes in the rod, once, ~250 s
 #
 # Carry [".whl"] in the first call; make each later one within the machine's 30 s idle release,
 # carrying nothing (the warm machine keeps the installed wheels and runs/). Each phase tars what
@@ -139,9 +140,17 @@ rod_score) # held-out programs only; the five shapes wait for a win here
   pack rod_score "$RUN/study"
   exit $status
   ;;
+rod_shapes) # scored once, after rod_score's held-out win (studies/results/h200/rod_correction/)
+  timed "rod shapes" "$RUN/rod/shapes.out.log" $PY -m eval.shapes --simulator rod \
+    --model models/softarm.xml --methods none stretch ccgan_ident --no-robustness \
+    --identified-path "$RUN/rod/distill/translator.ckpt" --out "$RUN/rod/shapes"
+  status=$?
+  pack rod_shapes "$RUN/rod/shapes" "$RUN/rod/shapes.out.log"
+  exit $status
+  ;;
 *)
   echo "unknown phase $phase: identify, aged_teacher, aged_distill, aged_shapes, rod_teacher," \
-    "rod_distill or rod_score"
+    "rod_distill, rod_score or rod_shapes"
   exit 2
   ;;
 esac
