@@ -57,6 +57,7 @@ arms its files record.
 
 from __future__ import annotations
 
+import dataclasses
 import inspect
 import os
 from pathlib import Path
@@ -64,6 +65,7 @@ from pathlib import Path
 import numpy as np
 
 from ccgan.translator import TRANSLATORS_DIR
+from mjx_arm import domains
 from tracking.held import stretch
 
 METHODS = ("none", "stretch", "ccgan", "ccgan_sim", "wcgan", "mpc", "oracle", "ccgan_ident")
@@ -196,7 +198,7 @@ class TranslatorMethod:
         return commands, k
 
 
-def load_translator(method: str, cfg) -> tuple[TranslatorMethod | None, str]:
+def load_translator(method: str, cfg, target_file=None) -> tuple[TranslatorMethod | None, str]:
     """Loads a translator method's checkpoint (`translator_source`) with `ccgan.load_translator`.
 
     Only a default checkpoint may be absent: then (None, a note naming the file and the flag that
@@ -209,19 +211,38 @@ def load_translator(method: str, cfg) -> tuple[TranslatorMethod | None, str]:
     arm's) loads only with cfg.trust_unlabelled_translators. The arms the files record go into
     `TranslatorMethod.model_hashes`, for `check_translator_arms`.
 
+    With cfg.target_domain_file (D_c a Domain read from a file, named "identified") a file must
+    be labelled for target "identified" (`ccgan.distill --domain identified --teach-domain`, as
+    `ccgan.adapt` makes), and the Domain file it was taught on must hold the same Domain fields
+    as cfg's (`check_taught_medium`): the same medium, whatever the files' paths, layouts or
+    bytes. A file labelled for a built-in domain (constrained, aged) is refused, as it is for
+    the other built-in one, even where its medium has the same values: labels name targets, and
+    a file's numbers are only compared where its label is "identified". A labelled file is
+    refused either way; cfg.trust_unlabelled_translators lets through only files without labels.
+
     Args:
       method: one of TRANSLATOR_METHODS.
       cfg: an `eval.pipeline.EvalConfig`; its paths and seeds are read.
+      target_file: the `mjx_arm.domains.DomainFile` of cfg.target_domain_file as already read
+        (`eval.pipeline.read_target_file`); None reads it here.
 
     Returns:
       (translator, "loaded" or what was loaded) or (None, why).
 
     Raises:
       TranslatorError: an asked-for checkpoint is absent, a checkpoint does not load, or it is
-        labelled for another method or domain, taught otherwise than its method says, or not
-        labelled and not trusted.
+        labelled for another method or domain, taught otherwise than its method says or on
+        another medium than cfg.target_domain_file's, or not labelled and not trusted.
     """
     path, asked = translator_source(method, cfg)
+    if cfg.target_domain_file is not None and target_file is None:
+        target_file = domains.read_domain_file(cfg.target_domain_file)
+    target = cfg.target_domain if target_file is None else domains.IDENTIFIED
+    given = (
+        f"--target-domain {cfg.target_domain}"
+        if target_file is None
+        else f"--target-domain-file {cfg.target_domain_file}"
+    )
     flag = PATH_FLAGS[method] + (" or $CCGAN_TRANSLATOR" if method == "ccgan" else "")
     if not path.is_file():
         if asked:
@@ -254,15 +275,15 @@ def load_translator(method: str, cfg) -> tuple[TranslatorMethod | None, str]:
                 file,
                 method=FILE_METHODS[method],
                 source_domain="source",
-                target_domain=cfg.target_domain,
+                target_domain=target,
                 trust_unlabelled=cfg.trust_unlabelled_translators,
             )
             taught = taught_domain(source[1])
             _check_taught(method, file, taught)
+            if target_file is not None and labels.get("target_domain") == domains.IDENTIFIED:
+                check_taught_medium(method, file, taught, target_file)
         except TranslatorMismatchError as err:
-            raise TranslatorError(
-                f"{method} ({PATH_FLAGS[method]}, --target-domain {cfg.target_domain}): {err}"
-            ) from err
+            raise TranslatorError(f"{method} ({PATH_FLAGS[method]}, {given}): {err}") from err
         except UnlabelledTranslatorError as err:
             raise TranslatorError(f"{method}: {err}") from err
         except TranslatorError:
@@ -312,6 +333,34 @@ def _check_taught(method: str, file: Path, taught: dict | None) -> None:
             f" ({PATH_FLAGS['ccgan_ident']})"
         )
     raise TranslatorError(f"{method} ({PATH_FLAGS[method]}): {file} {why}")
+
+
+def check_taught_medium(method: str, file: Path, taught: dict | None, target_file) -> None:
+    """Refuses a file labelled "identified" unless the Domain it was taught on (its
+    `ccgan.translator.taught_domain` record's "domain": every Domain field) holds the same fields
+    as `target_file`'s Domain (an `mjx_arm.domains.DomainFile`, the eval's D_c): an "identified"
+    translator is meant for the one medium it was taught on, and two Domain files of other
+    paths, layouts (identify.json or plain) or bytes with the same fields are the same medium.
+
+    Raises:
+      TranslatorError: no taught record (its medium is unknown) or other fields, naming both.
+    """
+    want = dataclasses.asdict(target_file.domain)
+    recorded = (taught or {}).get("domain")
+    if recorded == want:
+        return
+    flags = f"{PATH_FLAGS[method]}, --target-domain-file {target_file.path}"
+    if not isinstance(recorded, dict):
+        raise TranslatorError(
+            f"{method} ({flags}): {file} is labelled for target {domains.IDENTIFIED!r} but"
+            " records no Domain file it was taught on, so its medium is unknown"
+        )
+    differ = sorted(k for k in set(want) | set(recorded) if want.get(k) != recorded.get(k))
+    shown = ", ".join(f"{k} {recorded.get(k)!r} (here {want.get(k)!r})" for k in differ)
+    raise TranslatorError(
+        f"{method} ({flags}): {file} was taught on the Domain file {taught.get('path')} (sha256"
+        f" {str(taught.get('sha256'))[:12]}), another medium than this run's: {shown}"
+    )
 
 
 def check_translator_arms(translators: dict, arm, *also) -> None:
@@ -393,10 +442,9 @@ def taught_domains(translators: dict[str, TranslatorMethod], arm_s, arm_c) -> di
     distilled on a Domain file (`ccgan.translator.taught_domain`, e.g. ccgan_ident): {"files":
     {file: the Domain file's sha256}, "path", "sha256", "method" and "values" of the first file's
     record, "truth": the physical values of the target the table is scored in
-    (`mjx_arm.domains.physical_values` of `arm_c`, the chain in cfg.target_domain; `arm_s`
-    its source) and "error_pct": each identified value against it}. Empty when none was."""
-    from mjx_arm import domains
-
+    (`mjx_arm.domains.physical_values` of `arm_c`, the chain in cfg.target_domain or in the
+    Domain of cfg.target_domain_file; `arm_s` its source) and "error_pct": each identified value
+    against it}. Empty when none was."""
     truth = domains.physical_values(arm_c.mj_model, arm_s.mj_model, arm_c.domain)
     out = {}
     for method, tr in translators.items():

@@ -10,6 +10,12 @@ through the learned forward model F_c, the errors here come from the simulator i
 With EvalConfig.simulator "rod" the reference Cosserat rod (the paper's law, float64) scores
 the table instead of the fitted chain: targets, stretch k and every D_c rollout (`eval.rod`).
 
+With EvalConfig.target_domain_file D_c is the chain in a Domain read from a JSON file
+(`mjx_arm.domains.read_domain_file`, named "identified"), not a built-in medium: stretch only's
+k, every method's D_c rollouts, the tracker and the oracle run there, by the same code as for a
+named domain, and shapes.json ("target_domain_file") and shapes.md record the file's path,
+sha256 and fields.
+
 This module holds what is evaluated (`EvalConfig`) and how (`evaluate`: load, plan, then the
 simulator steps of `eval.simulate`, then write); the report is `eval.report`, the command line
 `eval.shapes`.
@@ -49,7 +55,7 @@ from eval.simulate import (
     score,
     start_oracle,
 )
-from mjx_arm import constants, programs
+from mjx_arm import constants, domains, programs
 from tracking.config import check_duration, check_fields, check_ints, require
 from tracking.held import choose_stretch_k, rollout_grouped
 from tracking.oracle import OracleConfig
@@ -142,6 +148,13 @@ class EvalConfig:
     trained on (`constants.TRANSLATOR_MODEL_PATH`, models/softarm.xml)."""
     target_domain: str = "constrained"
     """The domain translated into (D_c): "constrained", or "aged" for the second pair."""
+    target_domain_file: str | None = None
+    """A Domain JSON file (`mjx_arm.domains.read_domain_file`: an identify.json or
+    ``{"domain": {...}}``) whose Domain D_c is instead of target_domain's: the chain in it scores
+    the table, stretch only's k is chosen there and every method runs there; its record goes
+    into shapes.json and shapes.md (`target_file_record`). Translators must then be labelled
+    "identified" and taught on the same Domain fields (`eval.methods.load_translator`). Not
+    with a target_domain other than the default, nor with simulator "rod" (None: target_domain)."""
     ccgan_path: str | None = None
     """Checkpoint for ccgan.load_translator (None: the translator's default)."""
     wcgan_path: str | None = None
@@ -169,8 +182,6 @@ class EvalConfig:
 
     def __post_init__(self):
         """Refuses settings that would fail (or mean nothing) after minutes of work."""
-        from mjx_arm import domains
-
         _check_names("shapes", self.shapes, programs.SHAPES)
         _check_names("methods", self.methods, METHODS)
         _check_names("robust_methods", self.robust_methods, ("stretch", *TRANSLATOR_METHODS))
@@ -204,12 +215,58 @@ class EvalConfig:
             _check_file(field, getattr(self, field))
         require(isinstance(self.oracle, OracleConfig), "oracle", "must be an OracleConfig")
         rod.check_simulator(self)
+        _check_target_file(self)
         require(
             self.oracle.held or "oracle" in self.methods,
             "oracle.held",
             "(a command per control period) sets the oracle, which is not among the methods: add"
             " oracle to --methods or leave the flag out",
         )
+
+
+def _check_target_file(cfg: EvalConfig) -> None:
+    """target_domain_file: a readable Domain file (`read_target_file`), given instead of a
+    target_domain (left at its default), for the chain (the rod has only its named media)."""
+    if cfg.target_domain_file is None:
+        return
+    default = EvalConfig.__dataclass_fields__["target_domain"].default
+    require(
+        cfg.target_domain == default,
+        "target_domain_file",
+        f"gives D_c instead of target_domain, which must stay {default!r} (got"
+        f" {cfg.target_domain!r}): give one or the other",
+    )
+    require(
+        cfg.simulator != "rod",
+        "target_domain_file",
+        "is a medium of the chain: the rod (simulator 'rod') has only its own named media"
+        " (target_domain constrained or aged)",
+    )
+    try:
+        read_target_file(cfg)
+    except (OSError, ValueError) as err:
+        require(False, "target_domain_file", f"is unusable: {err}")
+
+
+def read_target_file(cfg: EvalConfig):
+    """The `mjx_arm.domains.DomainFile` of cfg.target_domain_file (its Domain named
+    "identified"), or None without one.
+
+    Raises:
+      FileNotFoundError, ValueError: as `mjx_arm.domains.read_domain_file`.
+    """
+    if cfg.target_domain_file is None:
+        return None
+    return domains.read_domain_file(cfg.target_domain_file)
+
+
+def target_file_record(target_file, arm_s, arm_c) -> dict:
+    """shapes.json's "target_domain_file": the file's record (`DomainFile.record`: path, sha256,
+    identification method, every Domain field) and "values", the D_c arm's physical values
+    (`mjx_arm.domains.physical_values`: viscosity over the source medium's, stiffness and mass
+    factors), comparable with the built-in media's."""
+    values = domains.physical_values(arm_c.mj_model, arm_s.mj_model, arm_c.domain)
+    return target_file.record() | {"values": values}
 
 
 def quick(cfg: EvalConfig) -> EvalConfig:
@@ -370,17 +427,22 @@ def machine_description() -> str:
     return f"{cpu}, {os.cpu_count()} cores; JAX device: {dev.platform} ({dev.device_kind})"
 
 
-def load_arms(cfg: EvalConfig):
-    """(D_s arm, D_c arm in cfg.target_domain) from cfg.xml, else the file cfg.model_path (by
-    default the I-Support arm the committed translators were trained on)."""
+def load_arms(cfg: EvalConfig, target_file=None):
+    """(D_s arm, D_c arm in cfg.target_domain, or in the Domain of cfg.target_domain_file) from
+    cfg.xml, else the file cfg.model_path (by default the I-Support arm the committed
+    translators were trained on). `target_file`: that file as already read
+    (`read_target_file`), so that one reading serves the run; None reads it here."""
+    target = cfg.target_domain
+    if cfg.target_domain_file is not None:
+        target = (target_file or read_target_file(cfg)).domain
     if cfg.xml is not None:
         return (
             mjx_arm.load(xml=cfg.xml, domain="source"),
-            mjx_arm.load(xml=cfg.xml, domain=cfg.target_domain),
+            mjx_arm.load(xml=cfg.xml, domain=target),
         )
     return (
         mjx_arm.load(cfg.model_path, domain="source"),
-        mjx_arm.load(cfg.model_path, domain=cfg.target_domain),
+        mjx_arm.load(cfg.model_path, domain=target),
     )
 
 
@@ -399,7 +461,7 @@ def evaluate(cfg: EvalConfig, command: str = "", log=print) -> dict:
     """
     t_start = time.perf_counter()
     run = RunLog(log)
-    cfg, arm_s, arm_c, translators, model, rods = _load(cfg, run)
+    cfg, arm_s, arm_c, translators, model, rods, target_file = _load(cfg, run)
     plan = _plan(cfg, arm_s, arm_c, translators, run, rods)
     oracle_future = start_oracle(plan, run)
     mpc_commands = run_mpc(plan, run)
@@ -416,6 +478,11 @@ def evaluate(cfg: EvalConfig, command: str = "", log=print) -> dict:
         "model_hash": plan.arm_s.model_hash,
         **({"rod": _rod_description(plan)} if rods is not None else {}),
         "model": model,
+        **(
+            {"target_domain_file": target_file_record(target_file, arm_s, arm_c)}
+            if target_file is not None
+            else {}
+        ),
         "config": dataclasses.asdict(cfg)
         | {"xml": None if cfg.xml is None else "custom", "model_path": model["file"]},
         "methods_run": plan.methods,
@@ -439,16 +506,19 @@ def _load(cfg: EvalConfig, run: RunLog) -> tuple:
 
     With cfg.simulator "rod" the rods are loaded too, and a translator is accepted when its
     files record the chain's D_c arm or the rod (`eval.rod`); the arm description then says
-    which each was trained on.
+    which each was trained on. With cfg.target_domain_file the file is read once, here: its
+    Domain is the D_c arm's, and the translators are checked against it.
 
     Returns:
       (cfg with out_dir set to the folder made, the chain's D_s arm, its D_c arm,
-      {method: TranslatorMethod}, `model_description(cfg)`, (D_s rod, D_c rod) or None).
+      {method: TranslatorMethod}, `model_description(cfg)`, (D_s rod, D_c rod) or None,
+      the `mjx_arm.domains.DomainFile` of cfg.target_domain_file or None).
     """
     t0 = time.perf_counter()
+    target_file = read_target_file(cfg)
     translators: dict[str, TranslatorMethod] = {}
     for method in (m for m in TRANSLATOR_METHODS if m in cfg.methods):
-        tr, why = load_translator(method, cfg)
+        tr, why = load_translator(method, cfg, target_file)
         if tr is None:
             run.note(f"{method.upper()} skipped: {why}.")
             continue
@@ -460,7 +530,7 @@ def _load(cfg: EvalConfig, run: RunLog) -> tuple:
             )
     run.timings["translators_s"] = time.perf_counter() - t0
     t0 = time.perf_counter()
-    arm_s, arm_c = load_arms(cfg)
+    arm_s, arm_c = load_arms(cfg, target_file)
     rods = rod.load_rod_arms(cfg.target_domain) if cfg.simulator == "rod" else None
     run.timings["load_s"] = time.perf_counter() - t0
     check_translator_arms(translators, arm_c, *(rods[1:] if rods else ()))
@@ -475,7 +545,7 @@ def _load(cfg: EvalConfig, run: RunLog) -> tuple:
     out_dir = output_dir(cfg)
     cfg = dataclasses.replace(cfg, out_dir=str(out_dir))
     run.log(f"writing into {out_dir}" + (" (the committed results)" if is_main_job(cfg) else ""))
-    return cfg, arm_s, arm_c, translators, model, rods
+    return cfg, arm_s, arm_c, translators, model, rods, target_file
 
 
 def _plan(cfg: EvalConfig, arm_s, arm_c, translators: dict, run: RunLog, rods=None) -> Plan:

@@ -28,6 +28,34 @@ def _paper_ccgan_line() -> str:
     )
 
 
+def target_name(results: dict) -> str:
+    """The D_c the table was scored in, as a name: "identified (Domain file)" where a file gave it
+    (shapes.json's "target_domain_file"), else the config's target_domain ("constrained" in
+    older files, which do not record it)."""
+    record = results.get("target_domain_file")
+    if record:
+        return f"{(record.get('domain') or {}).get('name', 'identified')} (Domain file)"
+    return results["config"].get("target_domain", "constrained")
+
+
+def target_file_line(results: dict) -> str | None:
+    """The header's line on the Domain file D_c was read from (`eval.pipeline.
+    target_file_record`): its path, sha256, the identification method where it has one, the
+    Domain fields it sets and the D_c arm's physical values; None without one."""
+    record = results.get("target_domain_file")
+    if not record:
+        return None
+    how = f", fitted by {record['method']}" if record.get("method") else ""
+    fields = ", ".join(f"{k} {v}" for k, v in (record.get("domain") or {}).items() if k != "name")
+    values = record.get("values") or {}
+    physical = ", ".join(f"{k} {v:.5g}" for k, v in values.items() if isinstance(v, int | float))
+    return (
+        f"- D_c read from the Domain file `{record['path']}` (sha256"
+        f" {str(record['sha256'])[:16]}{how}): {fields}; the D_c arm's physical values:"
+        f" {physical} (viscosity over the source medium's)"
+    )
+
+
 def run_mark(config: dict) -> str | None:
     """The words marking a quick run's plots, videos and report (None for other runs).
 
@@ -157,7 +185,8 @@ def _header(results: dict) -> list[str]:
         f"- machine: {results['machine']}",
         *filter(None, [scored_in(results)]),
         f"- simulator backend: {results['backend']}; model hash {results['model_hash']};"
-        f" domains: source -> {config.get('target_domain', 'constrained')}",
+        f" domains: source -> {target_name(results)}",
+        *filter(None, [target_file_line(results)]),
     ]
     if "model" in results:
         lines.append(
@@ -221,7 +250,7 @@ def taught_section(results: dict, heading: bool = True) -> list[str]:
     taught = results.get("taught_domains") or {}
     if not taught:
         return []
-    target = results["config"].get("target_domain", "constrained")
+    target = target_name(results)
     rod = results.get("simulator") == "rod"
     lines = ["", "## Taught on the identified arm (data-only)"] if heading else []
     lines.append("")

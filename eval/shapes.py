@@ -17,6 +17,12 @@ a GPU each batch costs about its longest program's time (every rod call is annou
 60 s table is a GPU job; on a 2-core CPU it simulates 25-37 s per second: use --duration and
 --no-robustness there (`eval.rod`).
 
+`--target-domain-file JSON` scores in a medium given by a Domain file (an identify.json of
+`python -m mjx_arm.identify`, or ``{"domain": {...}}``) instead of --target-domain: the chain in
+that Domain scores the table, and shapes.md names the file, its sha256 and its fields; only
+translators labelled "identified" and taught on the same Domain fields are scored
+(`eval.methods.load_translator`).
+
 The pressure programs themselves are pure functions of time and live below every layer that
 draws them, in `mjx_arm.programs` (the circle, rectangle, damped circle, ellipse and kite, each
 a [T, 3] array of chamber commands in bar at 10 Hz; the validation program; the random
@@ -126,6 +132,7 @@ FLAGS = {
     "robust_methods": "--robust-methods",
     "model_path": "--model",
     "target_domain": "--target-domain",
+    "target_domain_file": "--target-domain-file",
     **{f"{method}_path": flag for method, flag in PATH_FLAGS.items()},
     "oracle.steps": "--oracle-steps",
     "oracle.learning_rate": "--oracle-lr",
@@ -305,6 +312,17 @@ def _add_arm_options(p: argparse.ArgumentParser) -> None:
         "/aged_sim/translator.ckpt) or leave them out with --methods",
     )
     p.add_argument(
+        "--target-domain-file",
+        metavar="JSON",
+        default=None,
+        help="D_c instead of --target-domain: the chain in the Domain of this file (an"
+        ' identify.json of mjx_arm.identify, or {"domain": {...}}), which scores the table,'
+        " picks stretch only's k and runs every method; shapes.md records its path, sha256 and"
+        " fields. Translators must be labelled 'identified' and taught on the same Domain fields"
+        " (ccgan.adapt's); the committed ones are refused: leave them out with --methods. Not"
+        " with --simulator rod (default: --target-domain)",
+    )
+    p.add_argument(
         "--ccgan-path",
         metavar="CKPT",
         default=None,
@@ -425,6 +443,7 @@ def parse_args(argv: list[str] | None = None) -> EvalConfig:
             ccgan_ident_path=a.identified_path,
             trust_unlabelled_translators=a.trust_unlabelled_translators,
             target_domain=a.target_domain,
+            target_domain_file=a.target_domain_file,
             oracle=OracleConfig(
                 steps=a.oracle_steps,
                 learning_rate=a.oracle_lr,

@@ -342,6 +342,7 @@ def readme_tables(results: dict, names: dict[str, str] | None = None) -> list[st
     methods = [(m, (names or {}).get(m, h)) for m, h in README_METHODS if m in table[shapes[0]]]
     k = {m: table[shapes[0]][m]["k"] for m, _ in methods}
     paper = results["config"].get("target_domain", "constrained") == "constrained"
+    paper = paper and not results.get("target_domain_file")  # a medium from a Domain file
     head = [f"{h} (k = {k[m]})" if m != "none" else h for m, h in methods]
     head += ["paper Table I CCGAN-GP"] if paper else []
     lines = ["| shape | " + " | ".join(head) + " |", "|---" * (len(head) + 1) + "|"]

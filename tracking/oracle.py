@@ -22,6 +22,7 @@ from tqdm import tqdm
 
 from mjx_arm import constants
 from mjx_arm.atomic import write_atomically
+from mjx_arm.domains import DOMAINS
 from tracking import held as held_lib
 from tracking import metrics, mpc
 from tracking.config import ConfigError, check_duration, check_fields, check_ints, require
@@ -281,14 +282,21 @@ def _best_iterates(update, opt, z0, steps: int, progress: bool, progress_path=No
 
 def _fingerprint(arm_c, targets, inits, held, k: int, cfg: OracleConfig) -> str:
     """What the optimisation's iterates depend on: the arm, targets, start, k and settings
-    (not the number of steps: a longer run's first iterates are the shorter run's)."""
+    (not the number of steps: a longer run's first iterates are the shorter run's), and the
+    arm's Domain where it is none of the built-in ones (one read from a file: two such media
+    share the MJCF's hash; the built-in media are left out, so progress kept before stays
+    valid)."""
     digest = hashlib.sha256()
     for array in (targets, inits, held):
         digest.update(np.ascontiguousarray(array).tobytes())
     settings = dataclasses.asdict(cfg) | {"steps": None}
     if not cfg.substeps:  # progress kept before the field existed stays valid
         settings.pop("substeps")
-    digest.update(repr((arm_c.model_hash, k, settings)).encode())
+    key = (arm_c.model_hash, k, settings)
+    domain = getattr(arm_c, "domain", None)
+    if domain is not None and domain not in DOMAINS.values():
+        key += (domain,)
+    digest.update(repr(key).encode())
     return digest.hexdigest()[:16]
 
 
