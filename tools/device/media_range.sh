@@ -28,7 +28,8 @@ teacher)
   pids=() status=0 t0=$SECONDS
   for i in "${!PARTS[@]}"; do
     # shellcheck disable=SC2086 # each part's k, word-split on purpose
-    $PY -m ccgan.distill_range --out "$RUN/part$i" --teacher-ks ${PARTS[$i]} \
+    timeout -s TERM "${TEACHER_LIMIT_S:-530}" \
+      $PY -m ccgan.distill_range --out "$RUN/part$i" --teacher-ks ${PARTS[$i]} \
       >"$OUT/part$i.log" 2>&1 & # in $OUT: a call stopped at its limit still returns them
     pids+=($!)
   done
@@ -38,6 +39,8 @@ teacher)
     cp "$OUT/part$i.log" "$RUN/"
   done
   echo "teacher parts: wall $((SECONDS - t0)) s"
+  # the shards come back too: a machine lost between calls is refilled by carrying them
+  tar -cf "$OUT/teacher_parts.tar" "$RUN"/part{0,1,2,3} && ls -la "$OUT/teacher_parts.tar"
   exit $status
   ;;
 distill)
