@@ -453,6 +453,46 @@ def test_a_stopped_distillation_goes_on_from_its_next_epoch(arms, tmp_path):
     assert any("other settings" in line for line in logs) and len(afresh["train_loss"]) == 4
 
 
+def test_a_killed_distillation_goes_on_from_its_last_validation(arms, tmp_path):
+    """A run killed with no chance to save (a machine's time limit: SIGKILL, here an exception
+    from the callback) still left the training state of its last validation, epoch 2 of 4; the
+    same call then trains epochs 3-4 only and ends where an unkilled run ends, bit for bit."""
+
+    class Killed(Exception):
+        pass
+
+    every = dataclasses.replace(TINY, eval_every=1)
+    arm_s, arm_c = arms
+    shipped = load_translator()
+    cache, state = tmp_path / "teacher.npz", tmp_path / "training_state.npz"
+    whole, whole_history = distill.distill(
+        [shipped], arm_s, arm_c, every, cache=cache, progress=False, log=lambda _: None
+    )
+    reports = []
+
+    def killed_at_second_report(best, hist):
+        reports.append(len(hist["train_loss"]))
+        if len(reports) == 2:
+            raise Killed
+
+    with pytest.raises(Killed):
+        distill.distill(
+            [shipped], arm_s, arm_c, every, cache=cache, progress=False, log=lambda _: None,
+            on_validation=killed_at_second_report, resume=state,
+        )  # fmt: skip
+    assert reports == [1, 2] and state.exists()
+    logs = []
+    resumed, history = distill.distill(
+        [shipped], arm_s, arm_c, every, cache=cache, progress=False, log=logs.append,
+        resume=state,
+    )  # fmt: skip
+    assert any("2 of 4 epochs done" in line for line in logs)
+    assert history["complete"] and not state.exists()
+    assert history["train_loss"] == whole_history["train_loss"]
+    for got, want in zip(jax.tree.leaves(resumed[0]), jax.tree.leaves(whole[0]), strict=True):
+        np.testing.assert_array_equal(got, want)
+
+
 def test_teacher_cache_key_records_the_domain_programs_and_planner(arms, small_xml):
     """The aged arm's commands are not the constrained arm's: the key names the domain (its name
     and values), besides k, the arm, each split's program family and every planner setting."""

@@ -355,11 +355,21 @@ def train_with_resume(
         return params, opt_state, loss
 
     def report(best: BestIterates) -> None:
-        on_validation(_best_of_seeds(best, history, t0), history)
+        """After every validation: the training state kept (a run killed before its SIGTERM
+        handler ends, e.g. at a machine's time limit, loses at most `eval_every` epochs),
+        then the caller's callback."""
+        if resume is not None and latest and latest["epoch"] < config.epochs:
+            _save_training(
+                resume, key, latest["epoch"], latest["params"], latest["opt_state"], best,
+                history, rng,
+            )  # fmt: skip
+        if on_validation is not None:
+            on_validation(_best_of_seeds(best, history, t0), history)
 
     best = validated_loop(
         config.epochs, stacked, opt_state, best, train_once, validate_epoch,
-        None if on_validation is None else report, config=config, t0=t0, desc=desc,
+        None if on_validation is None and resume is None else report, config=config, t0=t0,
+        desc=desc,
         unit="epoch", progress=progress, log=log, stop=stop, start=first,
     )  # fmt: skip
     history["complete"] = stop is None or not stop.is_set()

@@ -5,15 +5,18 @@
 #
 #   bash tools/device/media_range.sh teacher   # 4 parts at once (--teacher-ks), ~6 min
 #   bash tools/device/media_range.sh distill   # the training run, reading the parts; SIGTERM at
-#                                              # 550 s, so rerun it until it ends (exit 0)
+#                                              # 420 s, so rerun it until it ends (exit 0)
 #   bash tools/device/media_range.sh score     # eval.media_range on held-out programs
 #
 # The default sample's 24 training media take k in {5, 10, 15, 20, 25, 30, 40, 50, 60}
 # (measured in MuJoCo C on the 2-core AMD EPYC, 2026-12-02); the MJX tracker is bound by its
 # steps' latency, so a part's time grows with the sum of its k plus one compile per k. The
-# parts below hold 65, 65, 65 and 60 of the 255. Carry [".whl"] in the first call and make
-# each later one within the machine's 30 s idle release (the warm machine keeps runs/). Not yet
-# run: docs/media_range.md, "What is owed".
+# parts below hold 65, 65, 65 and 60 of the 255. Carry the wheels in the first call (the tree
+# is too large beside the whole .whl: .whl-extra1/ with the mujoco, mujoco_mjx and trimesh wheels
+# and their lines of SHA256SUMS, 18.9 MB, is enough under MUJOCO_GL=disable) and make
+# each later one within the machine's 30 s idle release (the warm machine keeps runs/). Run on
+# one H200 on 2026-12-03 (studies/results/h200/media_range/): the teacher 456 s; the training
+# about 6.5 epochs/s plus 60-70 s per validation, so 1840 epochs take two distill calls.
 set -uo pipefail
 source "$(dirname "${BASH_SOURCE[0]}")/install.sh" || exit 1
 phase=${1:?teacher, distill or score}
@@ -40,12 +43,17 @@ teacher)
   done
   echo "teacher parts: wall $((SECONDS - t0)) s"
   # the shards come back too: a machine lost between calls is refilled by carrying them
-  tar -cf "$OUT/teacher_parts.tar" "$RUN"/part{0,1,2,3} && ls -la "$OUT/teacher_parts.tar"
+  # (in 15 MB pieces: a file over 16 MiB does not come back; `cat ...part-* | tar -x` here)
+  tar -cf - "$RUN"/part{0,1,2,3} | split -b 15M -d - "$OUT/teacher_parts.tar.part-"
+  ls -la "$OUT"/teacher_parts.tar.part-*
   exit $status
   ;;
 distill)
   t0=$SECONDS
-  timeout -s TERM 550 $PY -m ccgan.distill_range --out "$RUN/range" \
+  # SIGTERM at 420 s: the process then validates once more (60-70 s for 24 media on the
+  # H200's host) and saves; KILL 120 s later. The training state is also saved at every
+  # validation, so a kill loses at most eval_every epochs.
+  timeout -k 120 -s TERM "${DISTILL_LIMIT_S:-420}" $PY -m ccgan.distill_range --out "$RUN/range" \
     --teacher-from "$RUN"/part{0,1,2,3} >"$RUN/range.log" 2>&1
   status=$?
   tail -n 4 "$RUN/range.log"
