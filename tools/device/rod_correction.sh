@@ -29,9 +29,11 @@
 # whose rollouts took 546 s, so that call hit the limit before the teacher planned (nothing of
 # it was kept then: the correction cache came after); the four aged phases followed. Results:
 # studies/results/h200/aged_identified/ (its README). rod_teacher then ran alone in 484 s with
-# the arm's rollouts beside the rod's (studies/results/h200/rod_correction/); rod_distill and
-# rod_score are owed. The tree and .whl leave no room to carry the teacher cache (9.7 MB) to a
-# fresh machine, so run rod_teacher and rod_distill on one warm machine.
+# the arm's rollouts beside the rod's (studies/results/h200/rod_correction/). All four rod
+# phases ran on one warm H200 on 2026-12-02 (376, 294, 226 and 246 s; that folder's README):
+# every held-out family within 0.34-0.52x stretch only in the rod, the circle 0.96x. The tree
+# and the wheels leave no room to carry the teacher cache (9.7 MB) to a fresh machine, so run
+# rod_teacher and rod_distill on one warm machine.
 set -uo pipefail
 source "$(dirname "${BASH_SOURCE[0]}")/install.sh" || exit 1
 phase=${1:?a phase: see the header}
