@@ -376,3 +376,38 @@ def test_the_quick_run_end_to_end(tmp_path, monkeypatch, capsys):
     assert all(len(row["x_err_cm"]["conditioned"]) == 3 for row in result["rows"])
     assert scored.with_suffix(".png").stat().st_size > 0
     assert "| 2 | 1 | held out |" in scored.with_suffix(".md").read_text()
+
+
+def test_held_out_scores_are_the_same_with_media_scored_at_once(
+    source_arm, constrained_scale, monkeypatch
+):
+    """`media_x_err_cm` on a host of many cores scores several media at once, each in its own
+    thread pool: the same X_err, to the bit, as one medium after another on one core."""
+    from ccgan.distill_range.imitation import RangeData, media_x_err_cm
+    from ccgan.distill_range.media import Medium
+
+    chosen = [Medium(2.0, 1.0, 6.7, 5), Medium(10.0, 0.7, 47.0, 25), Medium(5.0, 0.9, 18.0, 10)]
+    arms = [
+        mjx_arm.load(
+            domain=mjx_arm.Domain(
+                viscosity_scale=media.viscosity_scale_of(m.drag_ratio, constrained_scale),
+                stiffness_scale=m.stiffness_scale,
+            )
+        )
+        for m in chosen
+    ]
+    pressures = shape_like_programs(3, 1.0, split="test_media_at_once").astype(np.float64)
+    targets = source_arm.rollout(pressures, backend="c")
+    data = RangeData(
+        s_train=None, c_train=None, s_val=None, x_val=targets, p_val=pressures, c_val=pressures,
+        medium_val=np.array([0, 1, 2]), window=4,
+    )  # fmt: skip
+    commands = np.stack([pressures, 0.9 * pressures])  # two "seeds"
+    monkeypatch.setenv("SOFTARM_THREADS", "1")
+    one_by_one = media_x_err_cm(arms, chosen, commands, data)
+    monkeypatch.setenv("SOFTARM_THREADS", "6")  # 2 trajectories a medium: 3 media at once
+    at_once = media_x_err_cm(arms, chosen, commands, data)
+    for a, b in zip(one_by_one, at_once, strict=True):
+        assert a.shape == (2, 3)
+        np.testing.assert_array_equal(a, b)
+    assert not np.array_equal(one_by_one[1][:, 0], one_by_one[1][:, 1])  # media differ

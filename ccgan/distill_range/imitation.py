@@ -70,16 +70,33 @@ def range_data(
 
 def media_x_err_cm(score_arms: list, media: list[Medium], commands, data: RangeData):
     """(window, whole) X_err (cm) [..., M] of commands [..., V, T, 3] (bar, one per source
-    step) for the held-out programs, each medium's in its arm at its k (MuJoCo C)."""
+    step) for the held-out programs, each medium's in its arm at its k (MuJoCo C).
+
+    A medium's batch is small (its 1-2 held-out programs for each seed: 3-6 trajectories), so
+    on a host of more cores than that several media run at once, each in its own thread pool
+    (MuJoCo C releases the GIL): the same rollouts, the same numbers, on a 16-core host about a
+    third of the wall time of one medium after another. One core or few: one at a time."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    from mjx_arm.machine import usable_cores
+
     commands = np.asarray(commands, np.float64)
-    head, whole = [], []
-    for m, (arm, medium) in enumerate(zip(score_arms, media, strict=True)):
+    per_seed = int(np.prod(commands.shape[:-3], dtype=int))
+
+    def one(m: int):
         mine = data.medium_val == m
-        h, w = window_and_whole_x_err_cm(
-            arm, commands[..., mine, :, :], medium.k, data.x_val[mine], data.window
+        return window_and_whole_x_err_cm(
+            score_arms[m], commands[..., mine, :, :], media[m].k, data.x_val[mine], data.window
         )
-        head.append(h)
-        whole.append(w)
+
+    busiest = per_seed * max(int(np.sum(data.medium_val == m)) for m in range(len(media)))
+    at_once = max(1, min(len(media), -(-usable_cores() // max(busiest, 1))))
+    if at_once == 1:
+        scored = [one(m) for m in range(len(media))]
+    else:
+        with ThreadPoolExecutor(at_once) as pool:
+            scored = list(pool.map(one, range(len(media))))
+    head, whole = zip(*scored, strict=True)
     return np.stack(head, -1), np.stack(whole, -1)
 
 
