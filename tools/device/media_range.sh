@@ -6,7 +6,12 @@
 #   bash tools/device/media_range.sh teacher   # 4 parts at once (--teacher-ks), ~6 min
 #   bash tools/device/media_range.sh distill   # the training run, reading the parts; SIGTERM at
 #                                              # 420 s, so rerun it until it ends (exit 0)
+#   bash tools/device/media_range.sh references # per-medium translators at (4, 0.8), (20, 0.65)
 #   bash tools/device/media_range.sh score     # eval.media_range on held-out programs
+#
+# A plan for one session's 30 minutes (not yet run as a whole): call 1 the teacher (carry the
+# wheels); call 2 `bash tools/device/media_range.sh distill & bash tools/device/media_range.sh
+# references; wait`; call 3 the same again (both resume), then score.
 #
 # The default sample's 24 training media take k in {5, 10, 15, 20, 25, 30, 40, 50, 60}
 # (measured in MuJoCo C on the 2-core AMD EPYC, 2026-12-02); the MJX tracker is bound by its
@@ -19,8 +24,9 @@
 # about 6.5 epochs/s plus 60-70 s per validation, so 1840 epochs take two distill calls.
 set -uo pipefail
 source "$(dirname "${BASH_SOURCE[0]}")/install.sh" || exit 1
-phase=${1:?teacher, distill or score}
+phase=${1:?teacher, distill, references or score}
 RUN=runs/media_range
+START=results/paper/rerun_2026-11-27/run/ccgan # the chain's CCGAN-GP, three seeds
 PARTS=("60 5" "50 15" "40 25" "30 20 10")
 export XLA_PYTHON_CLIENT_PREALLOCATE=false # processes share the GPU
 echo "$(nproc) cores; $(nvidia-smi -L 2>/dev/null | head -1)"
@@ -61,12 +67,48 @@ distill)
   tar -cf "$OUT/distill.tar" --exclude='*.npz' "$RUN/range" "$RUN/range.log"
   exit $status
   ;;
+references)
+  # Per-medium translators at two held-out media of the range, for issue 51's 1.25x criterion:
+  # each the chain's CCGAN-GP distilled (teacher planned, then 1,840 epochs) in that medium
+  # alone, with the range's teacher settings (PAPER_SETTINGS: 2 physics steps per planning
+  # period, programs of 60 s) and the per-pair stage's program count, at the rule's k. Both at
+  # once beside whatever else runs; SIGTERM at REF_LIMIT_S, rerun to go on (teacher by shard).
+  pids=() status=0 t0=$SECONDS
+  for medium in "4 0.8 10" "20 0.65 50"; do
+    read -r r s k <<<"$medium"
+    dir=$RUN/ref_r${r}_s${s}
+    mkdir -p "$dir"
+    $PY -c "import json, sys, mjx_arm; from mjx_arm import media
+from mjx_arm.identify_family import resolved_viscosity_scale as scale
+r, s, c = float(sys.argv[1]), float(sys.argv[2]), scale(mjx_arm.load(domain='constrained'))
+json.dump({'domain': {'viscosity_scale': media.viscosity_scale_of(r, c), 'stiffness_scale': s}},
+          open(sys.argv[3], 'w'))" "$r" "$s" "$dir/medium.json" || exit 1
+    timeout -k 120 -s TERM "${REF_LIMIT_S:-420}" $PY -m ccgan.distill \
+      --translators "$START"/translator_seed{0,1,2}.ckpt --seeds 0 1 2 --model models/softarm.xml \
+      --domain identified --start-domain constrained --teach-domain "$dir/medium.json" \
+      --out "$dir" --hold-factor "$k" --duration-s 60 --n-train 120 --n-train-full 120 \
+      --n-val 8 --n-val-full 8 --teacher-shard 256 --window-s 60 --batch-size 80 \
+      --horizon-steps 1 --iterations 1 --teacher-backend mjx --teacher-substeps 2 \
+      --learning-rate 1e-3 --final-lr-factor 0.02 --epochs 1840 --eval-every 460 \
+      --generator-unroll 10 --score-substeps 5 >"$dir.log" 2>&1 &
+    pids+=($!)
+  done
+  for pid in "${pids[@]}"; do wait "$pid" || status=1; done
+  for dir in "$RUN"/ref_r*/; do
+    echo "== ${dir%/}" && tr '\r' '\n' <"${dir%/}.log" | grep -a "teacher\|wrote\|held-out\|resum" | tail -5
+  done
+  echo "references: wall $((SECONDS - t0)) s (rc 1 where one stopped: rerun to go on)"
+  tar -cf "$OUT/references.tar" --exclude='*.npz' "$RUN"/ref_r* 
+  exit $status
+  ;;
 score)
   mkdir -p "$RUN/score"
   $PY -m eval.media_range --translators "$RUN"/range/translator_seed{0,1,2}.ckpt \
     --out "$RUN/score/media_range" \
     --reference 10 1 results/paper/rerun_2026-11-27/run/ccgan_sim/translator.ckpt \
     --reference 10 0.7 results/paper/rerun_2026-11-27/run/aged_sim/translator.ckpt \
+    --reference 4 0.8 "$RUN"/ref_r4_s0.8/translator.ckpt \
+    --reference 20 0.65 "$RUN"/ref_r20_s0.65/translator.ckpt \
     >"$RUN/score.log" 2>&1
   status=$?
   tail -n 20 "$RUN/score.log"
@@ -74,6 +116,6 @@ score)
   exit $status
   ;;
 *)
-  echo "unknown phase $phase: teacher, distill or score" && exit 2
+  echo "unknown phase $phase: teacher, distill, references or score" && exit 2
   ;;
 esac
