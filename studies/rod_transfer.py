@@ -62,8 +62,11 @@ def programs_by_family(
       duration_s: length of every program (s).
       seed: the distillation's seed (its programs' streams).
     """
-    config = DistillConfig(n_val=n_shape_like, n_val_full=n_shape_like, duration_s=duration_s)
-    shape_like = held_out_programs(config).astype(np.float64)
+    if n_shape_like:
+        config = DistillConfig(n_val=n_shape_like, n_val_full=n_shape_like, duration_s=duration_s)
+        shape_like = held_out_programs(config).astype(np.float64)
+    else:  # (a DistillConfig needs a held-out program; none of this family is asked for)
+        shape_like = np.zeros((0, int(round(duration_s * mjx_arm.CONTROL_HZ)), 3))
     kinds = shape_like_kinds(n_shape_like, seed, "distill/val")
     kinds += shape_like_kinds(n_shape_like, seed, "distill/val_full")
     babble = BabbleConfig(seed=seed, duration_s=duration_s)
@@ -127,6 +130,8 @@ def main(argv=None) -> None:
     a = parse_checked_args(p, argv)
     if a.stretch_k < 1 or a.n_shape_like < 0 or a.n_other < 0 or a.duration_s <= 0:
         p.error("--stretch-k must be >= 1, the counts >= 0 and --duration-s > 0")
+    if a.n_shape_like + a.n_other == 0:
+        p.error("--n-shape-like and --n-other are both 0: no program to score")
     specs = parse_translators(p, a.translators)
     translators = {name: [load_translator(path) for path in paths] for name, paths in specs.items()}
     t0 = time.perf_counter()
