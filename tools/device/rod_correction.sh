@@ -22,6 +22,9 @@
 #   bash tools/device/rod_correction.sh rod_distill    # ~340 s
 #   bash tools/device/rod_correction.sh rod_score      # rod_transfer, ~230 s
 #   bash tools/device/rod_correction.sh rod_shapes     # the five shapes in the rod, once, ~250 s
+#   STEP=2 bash tools/device/rod_correction.sh rod_teacher, rod_distill, rod_score: a second
+#     step, corrected from the committed corrected translator into runs/rod_correction/rod2
+#     (rod_score then scores the three side by side; not yet run)
 #
 # Carry [".whl"] in the first call; make each later one within the machine's 30 s idle release,
 # carrying nothing (the warm machine keeps the installed wheels and runs/). Each phase tars what
@@ -47,8 +50,17 @@ PROGRAMS=(--duration-s 60 --n-train 120 --n-train-full 120 --n-val 8 --n-val-ful
   --teacher-shard 256 --window-s 60 --horizon-steps 1 --iterations 1 --teacher-backend mjx)
 # The teacher tracks the rod's own D_s path, corrected: the better of the two corrected teachers
 # in the rod on held-out programs (studies/results/cpu/correction_teacher/correction_teacher_8.md).
+# STEP=2: a second step of the learning control, the correction taken from the first step's
+# corrected translator (committed: studies/results/h200/rod_correction/distill/) into rod2/.
+STEP=${STEP:-1}
+CORRECTED=studies/results/h200/rod_correction/distill
+case $STEP in
+1) CORRECT_FROM=$UNCORRECTED ROD_DIR=$RUN/rod ;;
+2) CORRECT_FROM=$CORRECTED ROD_DIR=$RUN/rod2 ;;
+*) echo "STEP=$STEP: 1 or 2" && exit 2 ;;
+esac
 ROD=(--model models/softarm.xml --domain constrained --teach-domain "$IDENT_ROD" --hold-factor 20
-  "${PROGRAMS[@]}" --teacher-substeps 2 --correction-translator "$UNCORRECTED/translator_seed0.ckpt"
+  "${PROGRAMS[@]}" --teacher-substeps 2 --correction-translator "$CORRECT_FROM/translator_seed0.ckpt"
   --source-simulator rod)
 AGED=(--model models/softarm.xml --domain aged --teach-domain "$IDENT_AGED" --k-candidates 20 25 30
   "${PROGRAMS[@]}" --teacher-substeps 5)
@@ -57,7 +69,7 @@ TRAIN=(--batch-size 80 --learning-rate 1e-3 --final-lr-factor 0.02 --epochs 1840
 SEEDS=(--translators "$START"/translator_seed{0,1,2}.ckpt --seeds 0 1 2)
 export XLA_PYTHON_CLIENT_PREALLOCATE=false # processes share the GPU
 echo "$(nproc) cores; $(nvidia-smi -L 2>/dev/null | head -1)"
-mkdir -p "$RUN/rod" "$RUN/aged" "$RUN/identify_50"
+mkdir -p "$ROD_DIR" "$RUN/aged" "$RUN/identify_50"
 
 timed() { # timed NAME LOG CMD...: runs CMD into LOG, prints its wall time and the log's tail
   local name=$1 log=$2 t0=$SECONDS status
@@ -116,28 +128,30 @@ aged_shapes) # scored once, after the schedule is fixed
   exit $status
   ;;
 rod_teacher) # stopped at the limit, it keeps the rod's rollouts (teacher_correction.npz): rerun
-  timed "rod corrected teacher" "$RUN/rod/teacher.out.log" timeout 560 $PY -m ccgan.distill \
-    "${ROD[@]}" --batch-size 32 --teacher-only --out "$RUN/rod/distill"
+  timed "rod corrected teacher" "$ROD_DIR/teacher.out.log" timeout 560 $PY -m ccgan.distill \
+    "${ROD[@]}" --batch-size 32 --teacher-only --out "$ROD_DIR/distill"
   status=$?
   # The rod's rollouts come back too (~7 MB): carried into runs/rod_correction/rod/distill/ of
   # a fresh machine, they spare the next call its ~290 s of rollouts.
-  cp -f "$RUN/rod/distill/teacher_correction.npz" "$OUT/" 2>/dev/null
-  pack rod_teacher "$RUN/rod"
+  cp -f "$ROD_DIR/distill/teacher_correction.npz" "$OUT/" 2>/dev/null
+  pack rod_teacher "$ROD_DIR"
   exit $status
   ;;
 rod_distill)
-  timed "rod corrected distill" "$RUN/rod/distill.out.log" $PY -m ccgan.distill "${ROD[@]}" \
-    "${TRAIN[@]}" "${SEEDS[@]}" --out "$RUN/rod/distill"
+  timed "rod corrected distill" "$ROD_DIR/distill.out.log" $PY -m ccgan.distill "${ROD[@]}" \
+    "${TRAIN[@]}" "${SEEDS[@]}" --out "$ROD_DIR/distill"
   status=$?
-  pack rod_distill "$RUN/rod"
+  pack rod_distill "$ROD_DIR"
   exit $status
   ;;
 rod_score) # held-out programs only; the five shapes wait for a win here
+  SECOND=$([[ $STEP == 2 ]] && echo 1)
   mkdir -p "$RUN/study"
   timed "rod_transfer" "$RUN/study/rod_transfer.log" $PY -m studies.rod_transfer \
     --n-shape-like 4 --n-other 2 --out "$RUN/study/rod_transfer" --translators \
     "uncorrected=$(echo "$UNCORRECTED"/translator_seed{0,1,2}.ckpt | tr ' ' ,)" \
-    "corrected=$(echo "$RUN"/rod/distill/translator_seed{0,1,2}.ckpt | tr ' ' ,)"
+    "corrected=$(echo "$CORRECTED"/translator_seed{0,1,2}.ckpt | tr ' ' ,)" \
+    ${SECOND:+"corrected_twice=$(echo "$RUN"/rod2/distill/translator_seed{0,1,2}.ckpt | tr ' ' ,)"}
   status=$?
   pack rod_score "$RUN/study"
   exit $status
