@@ -411,3 +411,17 @@ def test_held_out_scores_are_the_same_with_media_scored_at_once(
         assert a.shape == (2, 3)
         np.testing.assert_array_equal(a, b)
     assert not np.array_equal(one_by_one[1][:, 0], one_by_one[1][:, 1])  # media differ
+
+
+def test_step_times_are_the_same_measured_at_once(constrained_arm, monkeypatch):
+    """`measure_media` runs the media's step tests at once, a thread each: the same step times
+    as one after another, to the bit, and the rule's k from them (the study's (2, 1): k = 5)."""
+    from ccgan.distill_range.media import measure_media
+
+    points = [(2.0, 1.0), (2.5, 0.9), (3.0, 1.0)]
+    monkeypatch.setenv("SOFTARM_THREADS", "1")
+    one_by_one = measure_media(constrained_arm, points, log=lambda _: None)
+    monkeypatch.setenv("SOFTARM_THREADS", "3")
+    at_once = measure_media(constrained_arm, points, log=lambda _: None)
+    assert at_once == one_by_one and at_once[0].k == 5
+    assert at_once[1].t63_s > at_once[0].t63_s  # softer and slower than (2, 1)
