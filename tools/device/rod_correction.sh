@@ -22,6 +22,7 @@
 #   bash tools/device/rod_correction.sh rod_distill    # ~340 s
 #   bash tools/device/rod_correction.sh rod_score      # rod_transfer, ~230 s
 #   bash tools/device/rod_correction.sh rod_shapes     # the five shapes in the rod, once, ~250 s
+#   bash tools/device/rod_correction.sh offpair        # (c): half and twice D_c's drag, at once
 #   STEP=2 bash tools/device/rod_correction.sh rod_teacher, rod_distill, rod_score: a second
 #     step, corrected from the committed corrected translator into runs/rod_correction/rod2
 #     (rod_score then scores the three side by side; not yet run)
@@ -116,6 +117,28 @@ aged_distill)
     "${TRAIN[@]}" "${SEEDS[@]}" --start-domain constrained --out "$RUN/aged/distill"
   status=$?
   pack aged_distill "$RUN/aged"
+  exit $status
+  ;;
+offpair) # (c): a translator for each medium off the pair, taught on the arm identified from
+  # 50 of its programs (committed: studies/results/h200/aged_identified/identify_50/), k chosen
+  # there, the two at once; SIGTERM at OFFPAIR_LIMIT_S, rerun to go on (teacher by shard, the
+  # training by its state). Scored afterwards in the true medium on any CPU: eval.shapes
+  # --target-domain-file with the truth (not yet run).
+  pids=() status=0
+  for c in half_drag double_drag; do
+    mkdir -p "$RUN/offpair/$c"
+    timeout -k 120 -s TERM "${OFFPAIR_LIMIT_S:-450}" $PY -m ccgan.distill \
+      --model models/softarm.xml --domain identified --start-domain constrained \
+      --teach-domain studies/results/h200/aged_identified/identify_50/$c/identify.json \
+      --k-candidates 5 10 15 20 25 30 40 "${PROGRAMS[@]}" --teacher-substeps 2 "${TRAIN[@]}" \
+      "${SEEDS[@]}" --out "$RUN/offpair/$c/distill" >"$RUN/offpair/$c.log" 2>&1 &
+    pids+=($!)
+  done
+  for pid in "${pids[@]}"; do wait "$pid" || status=1; done
+  for c in half_drag double_drag; do
+    echo "== $c" && tr '\r' '\n' <"$RUN/offpair/$c.log" | grep -a "k =\|wrote\|resum\|stopp" | tail -4
+  done
+  pack offpair "$RUN/offpair"
   exit $status
   ;;
 aged_shapes) # scored once, after the schedule is fixed
