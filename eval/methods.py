@@ -27,6 +27,15 @@ Methods:
            data-only counterpart of ccgan_sim, which was taught in the true target (privileged):
            a file taught on a Domain file is refused as ccgan_sim, one taught in the target is
            refused as ccgan_ident.
+  ccgan_range  "distilled (range)": the conditioned translator over a range of media
+           (`ccgan.distill_range`, issue 51; docs/media_range.md), its file labelled
+           "distill_range" for target "media_range" whatever the run's target: --range-path, or
+           results/paper/rerun_2026-11-27/run/media_range/translator.ckpt (none is committed).
+           It translates into the run's own D_c, the built-in Domain of --target-domain
+           (constrained: drag ratio r = 10, stiffness s = 1; aged: r = 10, s = 0.7) or the Domain
+           of --target-domain-file, at the k its rule gives that medium (`Translator.translate(...,
+           target=Domain)`); a medium outside its range is refused when it loads. shapes.json's
+           "translator_labels" record the (r, s) and k ("medium"). Not in the default methods.
   mpc      receding-horizon tracking in the D_c simulator itself (`tracking.mpc.track`, MuJoCo C,
            k = the stretch k): at every source step the next command is planned by Gauss-Newton
            on the simulated tracking error and applied. Not a translator (it needs the D_c
@@ -64,14 +73,25 @@ from pathlib import Path
 
 import numpy as np
 
+from ccgan.media_range import MEDIA_RANGE
 from ccgan.translator import TRANSLATORS_DIR
 from mjx_arm import domains
 from tracking.held import stretch
 
-METHODS = ("none", "stretch", "ccgan", "ccgan_sim", "wcgan", "mpc", "oracle", "ccgan_ident")
+METHODS = (
+    "none",
+    "stretch",
+    "ccgan",
+    "ccgan_sim",
+    "wcgan",
+    "mpc",
+    "oracle",
+    "ccgan_ident",
+    "ccgan_range",
+)
 #: What runs without --methods (the oracle is left out on CPU).
 DEFAULT_METHODS = ("none", "stretch", "ccgan", "ccgan_sim", "wcgan", "oracle")
-TRANSLATOR_METHODS = ("ccgan", "ccgan_sim", "wcgan", "ccgan_ident")
+TRANSLATOR_METHODS = ("ccgan", "ccgan_sim", "wcgan", "ccgan_ident", "ccgan_range")
 #: Each method's one name, in tables, plots, videos, notes and help.
 METHOD_NAMES = {
     "none": "untranslated",
@@ -82,6 +102,7 @@ METHOD_NAMES = {
     "mpc": "tracker",
     "oracle": "oracle",
     "ccgan_ident": "distilled (identified arm)",
+    "ccgan_range": "distilled (range)",
 }
 #: Other names a command line accepts for a method (--methods, --robust-methods).
 METHOD_ALIASES = {"distilled": "ccgan_sim"}
@@ -92,12 +113,17 @@ WCGAN_DEFAULT_PATH = TRANSLATORS_DIR / "wcgan" / "translator.ckpt"
 #: Where the translator distilled on the identified arm is looked for when no path is given
 #: (the chain's ident_sim stage; absent until a run with it is committed).
 IDENT_DEFAULT_PATH = TRANSLATORS_DIR / "ident_sim" / "translator.ckpt"
+#: Where the conditioned translator over a range of media is looked for when no path is given
+#: (absent until a run with one is committed; `ccgan.distill_range --out DIR` writes
+#: DIR/translator_seed<s>.ckpt).
+RANGE_DEFAULT_PATH = TRANSLATORS_DIR / "media_range" / "translator.ckpt"
 #: The flag that gives each translator method's checkpoint, named in notes and errors.
 PATH_FLAGS = {
     "ccgan": "--ccgan-path",
     "wcgan": "--wcgan-path",
     "ccgan_sim": "--distilled-path",
     "ccgan_ident": "--identified-path",
+    "ccgan_range": "--range-path",
 }
 #: The "method" a translator file must record (`ccgan.translator.LABELS`) to be scored as each
 #: translator method: a WCGAN-GP file is never reported as CCGAN-GP, a trained one never as
@@ -108,7 +134,14 @@ FILE_METHODS = {
     "wcgan": ("wcgan",),
     "ccgan_sim": ("distill",),
     "ccgan_ident": ("distill",),
+    "ccgan_range": ("distill_range",),
 }
+#: The target domain a translator method's files must record when it is not the run's own
+#: (cfg.target_domain, or "identified" with a Domain file): a conditioned translator's is the
+#: range's label, whatever medium it is scored in (`CONDITIONED_METHODS`).
+FILE_TARGETS = {"ccgan_range": MEDIA_RANGE}
+#: The translator methods that take the run's D_c as their target (`TranslatorMethod.target`).
+CONDITIONED_METHODS = ("ccgan_range",)
 #: The distilled methods, by what taught them: ccgan_ident's files must record the Domain file
 #: they were taught on (`ccgan.translator.taught_domain`), ccgan_sim's must not (taught in the
 #: target itself), so that neither is reported as the other.
@@ -142,6 +175,7 @@ def translator_source(method: str, cfg) -> tuple[Path, bool]:
         "ccgan_sim": (cfg.ccgan_sim_path, CCGAN_SIM_DEFAULT_PATH),
         "wcgan": (cfg.wcgan_path, WCGAN_DEFAULT_PATH),
         "ccgan_ident": (cfg.ccgan_ident_path, IDENT_DEFAULT_PATH),
+        "ccgan_range": (cfg.ccgan_range_path, RANGE_DEFAULT_PATH),
     }[method]
     return Path(given or default), given is not None
 
@@ -155,7 +189,12 @@ class TranslatorMethod:
     that was recorded add none); `files` the checkpoint files loaded, the main one first, and
     `labels` what each records of itself (`ccgan.translator.translator_labels`, with
     "started_from" where a distillation recorded its start and "taught_domain" where it was
-    taught on a Domain file), for the report.
+    taught on a Domain file), for the report; a conditioned translator's (`CONDITIONED_METHODS`)
+    add "medium", the (r, s) and k it translates into (`medium_record`).
+
+    With `target` (an `mjx_arm.Domain`, the run's D_c) every translation is
+    `translate(p_s, poses_s, target=target)`: a conditioned translator's, which returns the k
+    its rule gives that medium; None for a translator of one pair.
     """
 
     def __init__(
@@ -166,8 +205,10 @@ class TranslatorMethod:
         model_hashes: frozenset = frozenset(),
         files: tuple[Path, ...] = (),
         labels: tuple[dict, ...] = (),
+        target=None,
     ):
         self.name = name
+        self.target = target
         self.files = tuple(Path(f) for f in files)
         self.labels = tuple(labels)
         self._obj = obj
@@ -181,12 +222,13 @@ class TranslatorMethod:
 
     def translate(self, pressures_s: np.ndarray, poses_s: np.ndarray, seed: int):
         """Returns (D_c commands [T * k, 3] bar, k)."""
+        medium = {} if self.target is None else {"target": self.target}
         if self.trained_seeds:
-            out = self.trained_seeds[seed].translate(pressures_s, poses_s)
+            out = self.trained_seeds[seed].translate(pressures_s, poses_s, **medium)
         elif self.takes_seed:
-            out = self._obj.translate(pressures_s, poses_s, seed=seed)
+            out = self._obj.translate(pressures_s, poses_s, seed=seed, **medium)
         else:
-            out = self._obj.translate(pressures_s, poses_s)
+            out = self._obj.translate(pressures_s, poses_s, **medium)
         commands, k = out
         commands = np.asarray(commands, dtype=np.float64)
         k = int(k)
@@ -220,6 +262,12 @@ def load_translator(method: str, cfg, target_file=None) -> tuple[TranslatorMetho
     a file's numbers are only compared where its label is "identified". A labelled file is
     refused either way; cfg.trust_unlabelled_translators lets through only files without labels.
 
+    A conditioned method's files (`CONDITIONED_METHODS`: ccgan_range) must be labelled for
+    their range (`FILE_TARGETS`: "media_range") whatever the run's target, and must cover the
+    run's D_c (the built-in Domain of cfg.target_domain, or cfg.target_domain_file's): its
+    Domain is read as (r, s) and given k by each file's rule here (`medium_record`, the labels'
+    "medium"), and becomes `TranslatorMethod.target`.
+
     Args:
       method: one of TRANSLATOR_METHODS.
       cfg: an `eval.pipeline.EvalConfig`; its paths and seeds are read.
@@ -232,12 +280,17 @@ def load_translator(method: str, cfg, target_file=None) -> tuple[TranslatorMetho
     Raises:
       TranslatorError: an asked-for checkpoint is absent, a checkpoint does not load, or it is
         labelled for another method or domain, taught otherwise than its method says or on
-        another medium than cfg.target_domain_file's, or not labelled and not trusted.
+        another medium than cfg.target_domain_file's, or not labelled and not trusted; a
+        conditioned translator whose range does not hold the run's D_c.
     """
     path, asked = translator_source(method, cfg)
     if cfg.target_domain_file is not None and target_file is None:
         target_file = domains.read_domain_file(cfg.target_domain_file)
     target = cfg.target_domain if target_file is None else domains.IDENTIFIED
+    medium = None
+    if method in CONDITIONED_METHODS:
+        medium = domains.resolve(cfg.target_domain) if target_file is None else target_file.domain
+    target = FILE_TARGETS.get(method, target)
     given = (
         f"--target-domain {cfg.target_domain}"
         if target_file is None
@@ -292,6 +345,7 @@ def load_translator(method: str, cfg, target_file=None) -> tuple[TranslatorMetho
             raise TranslatorError(
                 f"{method}: {file} does not load ({type(err).__name__}: {err})"
             ) from err
+        into = {} if medium is None else {"medium": medium_record(method, file, translator, medium)}
         hashes.add(labels.get("model_hash"))
         loaded_files.append(file)
         started_from = source[1].get("started_from")
@@ -299,6 +353,7 @@ def load_translator(method: str, cfg, target_file=None) -> tuple[TranslatorMetho
             labels
             | ({"started_from": started_from} if started_from else {})
             | ({"taught_domain": taught} if taught else {})
+            | into
         )
         return translator
 
@@ -313,8 +368,68 @@ def load_translator(method: str, cfg, target_file=None) -> tuple[TranslatorMetho
             why = f"loaded, trained seeds {list(cfg.seeds)}"
     model_hashes = frozenset(hashes - {None})
     return TranslatorMethod(
-        method, obj, seeds, model_hashes, tuple(loaded_files), tuple(file_labels)
+        method, obj, seeds, model_hashes, tuple(loaded_files), tuple(file_labels), medium
     ), why
+
+
+def medium_record(method: str, file: Path, translator, medium) -> dict:
+    """What a conditioned translator (`ccgan.translator.Translator` with a range) makes of the
+    run's D_c `medium` (an `mjx_arm.Domain`): {"drag_ratio": r, "stiffness_scale": s, "k": the
+    rule's k, "t63_s": the 63% step time (s) its file's fit gives, "role": "training",
+    "held out" or "other" (`eval.media_range.role`), "range": {"drag_ratio", "stiffness_scale"}}.
+
+    Raises:
+      TranslatorError: the file records no range, or the medium is outside it or not one it can
+        read (an absolute viscosity, another mass); the message names the method, the medium and
+        the range.
+    """
+    from eval.media_range import role
+
+    try:
+        _, k = translator.target_condition(medium)
+        r, s = translator.media.drag_and_stiffness(medium)
+    except (TypeError, ValueError) as err:
+        span = (
+            ""
+            if translator.media is None
+            else f" (its range: drag ratio r {list(translator.media.drag_ratio_range)}, stiffness"
+            f" scale s {list(translator.media.stiffness_range)})"
+        )
+        raise TranslatorError(
+            f"{method} ({PATH_FLAGS[method]}): {file} cannot translate into this run's D_c,"
+            f" {_medium_words(medium, translator)}{span}: {err}"
+        ) from err
+    return {
+        "drag_ratio": r,
+        "stiffness_scale": s,
+        "k": int(k),
+        "t63_s": translator.media.step_time.t63_s(r, s),
+        "role": role(translator, r, s),
+        "range": {
+            "drag_ratio": list(translator.media.drag_ratio_range),
+            "stiffness_scale": list(translator.media.stiffness_range),
+        },
+    }
+
+
+def _medium_words(medium, translator) -> str:
+    """ "the Domain 'identified' (viscosity_scale 1207.01, drag ratio r = 600, stiffness_scale
+    1.0)": the medium's fields that are set (or are read as r and s), and its r."""
+    fields = dataclasses.asdict(medium)
+    default = dataclasses.asdict(domains.Domain())
+    shown = [
+        f"{key} {value!r}"
+        for key, value in fields.items()
+        if key != "name"
+        and (value != default[key] or key in ("viscosity_scale", "stiffness_scale"))
+    ]
+    if translator.media is not None and medium.viscosity is None:
+        from mjx_arm import media
+
+        scale = medium.viscosity_scale or translator.media.constrained_viscosity_scale
+        ratio = media.drag_ratio_of(scale, translator.media.constrained_viscosity_scale)
+        shown.insert(1, f"drag ratio r = {ratio:.4g}")
+    return f"the Domain {medium.name!r} ({', '.join(shown)})"
 
 
 def _check_taught(method: str, file: Path, taught: dict | None) -> None:

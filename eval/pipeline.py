@@ -32,6 +32,7 @@ from pathlib import Path
 import numpy as np
 
 import mjx_arm  # (before jax: sets the XLA CPU flag)
+from ccgan.media_range import K_PER_T63_S
 from eval import rod
 from eval.methods import (
     DEFAULT_METHODS,
@@ -165,6 +166,10 @@ class EvalConfig:
     ccgan_ident_path: str | None = None
     """Checkpoint of the translator distilled on an identified arm (`ccgan.distill
     --teach-domain`), labelled "distill" for target_domain (None: IDENT_DEFAULT_PATH)."""
+    ccgan_range_path: str | None = None
+    """Checkpoint of the conditioned translator over a range of media (`ccgan.distill_range`),
+    labelled "distill_range" for "media_range"; scored in this run's D_c at its rule's k (None:
+    RANGE_DEFAULT_PATH)."""
     trust_unlabelled_translators: bool = False
     """Score translator files that do not record their method, domains and arm (the solid-disc
     arm's, results/solid/translators/); labelled files are always checked."""
@@ -211,7 +216,8 @@ class EvalConfig:
             "target_domain",
             f"must be one of {targets}, got {self.target_domain!r}",
         )
-        for field in ("ccgan_path", "wcgan_path", "ccgan_sim_path", "ccgan_ident_path"):
+        paths = ("ccgan_path", "wcgan_path", "ccgan_sim_path", "ccgan_ident_path")
+        for field in (*paths, "ccgan_range_path"):
             _check_file(field, getattr(self, field))
         require(isinstance(self.oracle, OracleConfig), "oracle", "must be an OracleConfig")
         rod.check_simulator(self)
@@ -488,6 +494,7 @@ def evaluate(cfg: EvalConfig, command: str = "", log=print) -> dict:
         "methods_run": plan.methods,
         "notes": run.notes,
         **({"taught_domains": taught} if taught else {}),
+        "translator_labels": {method: list(tr.labels) for method, tr in translators.items()},
         "stretch_k": plan.k_stretch,
         "stretch_validation_x_err_cm": {str(k): v for k, v in plan.k_errors.items()},
         "table": table,
@@ -528,6 +535,9 @@ def _load(cfg: EvalConfig, run: RunLog) -> tuple:
                 f"{method.upper()}: one separately trained model per seed "
                 f"{sorted(tr.trained_seeds)}; its ± spans training seeds."
             )
+        medium = tr.labels[0].get("medium") if tr.labels else None
+        if medium:
+            run.note(medium_note(method, medium))
     run.timings["translators_s"] = time.perf_counter() - t0
     t0 = time.perf_counter()
     arm_s, arm_c = load_arms(cfg, target_file)
@@ -598,6 +608,23 @@ def _plan(cfg: EvalConfig, arm_s, arm_c, translators: dict, run: RunLog, rods=No
         horizon,
         rollout_backend=backend,
         tracker_arm=arm_c if rods is not None else None,
+    )
+
+
+def medium_note(method: str, medium: dict) -> str:
+    """The note of a conditioned translator's medium (`eval.methods.medium_record`): the (r, s)
+    it translates into, what that medium is to its range, and the k its rule holds."""
+    span = medium["range"]
+    role = {
+        "training": "one of its training media",
+        "held out": "one of its held-out media",
+    }.get(medium["role"], "neither a training nor a held-out medium")
+    return (
+        f"{method.upper()}: translates into this run's D_c as drag ratio r ="
+        f" {medium['drag_ratio']:.4g}, stiffness s = {medium['stiffness_scale']:.4g} (inside its"
+        f" range r {span['drag_ratio']}, s {span['stiffness_scale']}; {role}), each command"
+        f" held its rule's k = {medium['k']} (the grid's nearest to {K_PER_T63_S} x the fitted"
+        f" 63% step time {medium['t63_s']:.1f} s)."
     )
 
 

@@ -20,6 +20,7 @@ COLORS = {
     "stretch": "tab:orange",
     "ccgan": "tab:green",
     "ccgan_sim": "tab:purple",
+    "ccgan_range": "tab:brown",
     "wcgan": "tab:red",
     "mpc": "tab:gray",
     "oracle": "black",

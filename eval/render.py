@@ -428,7 +428,7 @@ def _ensure_ffmpeg() -> None:
 
 
 #: The translated panel's method: the first of these a run has (the best translator first).
-VIDEO_BEST = ("ccgan_sim", "ccgan", "wcgan", "oracle", "stretch")
+VIDEO_BEST = ("ccgan_sim", "ccgan_range", "ccgan", "wcgan", "oracle", "stretch")
 #: D_c panels of a video at most (each costs as much rendering as the D_s panel).
 VIDEO_DC_PANELS = 3
 

@@ -98,6 +98,7 @@ FINDINGS_BASES = {
     "ccgan_sim": ("none", "stretch", "ccgan", "wcgan", "mpc"),
     "wcgan": ("none", "stretch"),
     "ccgan_ident": ("none", "stretch", "ccgan_sim", "mpc"),
+    "ccgan_range": ("none", "stretch", "ccgan_sim", "mpc"),
 }
 
 

@@ -21,7 +21,9 @@ a GPU each batch costs about its longest program's time (every rod call is annou
 `python -m mjx_arm.identify`, or ``{"domain": {...}}``) instead of --target-domain: the chain in
 that Domain scores the table, and shapes.md names the file, its sha256 and its fields; only
 translators labelled "identified" and taught on the same Domain fields are scored
-(`eval.methods.load_translator`).
+(`eval.methods.load_translator`), and the conditioned translator over a range of media
+(`--methods ... ccgan_range --range-path CKPT`), which translates into any medium of its range at
+its rule's k, with either --target-domain or --target-domain-file.
 
 The pressure programs themselves are pure functions of time and live below every layer that
 draws them, in `mjx_arm.programs` (the circle, rectangle, damped circle, ellipse and kite, each
@@ -48,6 +50,7 @@ from eval.methods import (
     METHOD_NAMES,
     METHODS,
     PATH_FLAGS,
+    RANGE_DEFAULT_PATH,
     WCGAN_DEFAULT_PATH,
     TranslatorError,
 )
@@ -319,7 +322,8 @@ def _add_arm_options(p: argparse.ArgumentParser) -> None:
         ' identify.json of mjx_arm.identify, or {"domain": {...}}), which scores the table,'
         " picks stretch only's k and runs every method; shapes.md records its path, sha256 and"
         " fields. Translators must be labelled 'identified' and taught on the same Domain fields"
-        " (ccgan.adapt's); the committed ones are refused: leave them out with --methods. Not"
+        " (ccgan.adapt's), or be the conditioned ccgan_range with the medium in its range; the"
+        " committed ones are refused: leave them out with --methods. Not"
         " with --simulator rod (default: --target-domain)",
     )
     p.add_argument(
@@ -353,6 +357,16 @@ def _add_arm_options(p: argparse.ArgumentParser) -> None:
         " --teach-domain; labelled 'distill' for --target-domain, recording its Domain file),"
         " scored as ccgan_ident in the true --target-domain at the k it holds (default:"
         f" {_shown(IDENT_DEFAULT_PATH)}, skipped if absent)",
+    )
+    p.add_argument(
+        "--range-path",
+        metavar="CKPT",
+        default=None,
+        help="conditioned translator over a range of media (ccgan.distill_range; labelled"
+        " 'distill_range' for 'media_range', translator_seed<s>.ckpt beside it), scored as"
+        " ccgan_range in this run's D_c (--target-domain or --target-domain-file) at its rule's"
+        " k; a medium outside its range is refused (default:"
+        f" {_shown(RANGE_DEFAULT_PATH)}, skipped if absent)",
     )
     p.add_argument(
         TRUST_FLAG,
@@ -441,6 +455,7 @@ def parse_args(argv: list[str] | None = None) -> EvalConfig:
             wcgan_path=a.wcgan_path,
             ccgan_sim_path=a.distilled_path,
             ccgan_ident_path=a.identified_path,
+            ccgan_range_path=a.range_path,
             trust_unlabelled_translators=a.trust_unlabelled_translators,
             target_domain=a.target_domain,
             target_domain_file=a.target_domain_file,
