@@ -334,7 +334,9 @@ def load_translator(method: str, cfg, target_file=None) -> tuple[TranslatorMetho
             taught = taught_domain(source[1])
             _check_taught(method, file, taught)
             if target_file is not None and labels.get("target_domain") == domains.IDENTIFIED:
-                check_taught_medium(method, file, taught, target_file)
+                check_taught_medium(
+                    method, file, taught, target_file, getattr(cfg, "taught_medium_rtol", 0.0)
+                )
         except TranslatorMismatchError as err:
             raise TranslatorError(f"{method} ({PATH_FLAGS[method]}, {given}): {err}") from err
         except UnlabelledTranslatorError as err:
@@ -450,12 +452,17 @@ def _check_taught(method: str, file: Path, taught: dict | None) -> None:
     raise TranslatorError(f"{method} ({PATH_FLAGS[method]}): {file} {why}")
 
 
-def check_taught_medium(method: str, file: Path, taught: dict | None, target_file) -> None:
+def check_taught_medium(
+    method: str, file: Path, taught: dict | None, target_file, rtol: float = 0.0
+) -> None:
     """Refuses a file labelled "identified" unless the Domain it was taught on (its
     `ccgan.translator.taught_domain` record's "domain": every Domain field) holds the same fields
     as `target_file`'s Domain (an `mjx_arm.domains.DomainFile`, the eval's D_c): an "identified"
     translator is meant for the one medium it was taught on, and two Domain files of other
     paths, layouts (identify.json or plain) or bytes with the same fields are the same medium.
+    With rtol > 0 (`EvalConfig.taught_medium_rtol`) each numeric field may differ by that much,
+    relative to the target's: a translator built from data, taught on the identified medium,
+    scored in the true one.
 
     Raises:
       TranslatorError: no taught record (its medium is unknown) or other fields, naming both.
@@ -464,6 +471,15 @@ def check_taught_medium(method: str, file: Path, taught: dict | None, target_fil
     recorded = (taught or {}).get("domain")
     if recorded == want:
         return
+    if isinstance(recorded, dict) and set(recorded) == set(want) and rtol > 0:
+
+        def near(a, b) -> bool:
+            if isinstance(a, (int, float)) and isinstance(b, (int, float)) and b != 0:
+                return abs(a - b) <= rtol * abs(b)
+            return a == b
+
+        if all(near(recorded[k], want[k]) for k in want if k != "name"):
+            return
     flags = f"{PATH_FLAGS[method]}, --target-domain-file {target_file.path}"
     if not isinstance(recorded, dict):
         raise TranslatorError(
@@ -472,9 +488,10 @@ def check_taught_medium(method: str, file: Path, taught: dict | None, target_fil
         )
     differ = sorted(k for k in set(want) | set(recorded) if want.get(k) != recorded.get(k))
     shown = ", ".join(f"{k} {recorded.get(k)!r} (here {want.get(k)!r})" for k in differ)
+    allowed = f" (more than --taught-medium-rtol {rtol:g})" if rtol > 0 else ""
     raise TranslatorError(
         f"{method} ({flags}): {file} was taught on the Domain file {taught.get('path')} (sha256"
-        f" {str(taught.get('sha256'))[:12]}), another medium than this run's: {shown}"
+        f" {str(taught.get('sha256'))[:12]}), another medium than this run's{allowed}: {shown}"
     )
 
 

@@ -136,6 +136,7 @@ FLAGS = {
     "model_path": "--model",
     "target_domain": "--target-domain",
     "target_domain_file": "--target-domain-file",
+    "taught_medium_rtol": "--taught-medium-rtol",
     **{f"{method}_path": flag for method, flag in PATH_FLAGS.items()},
     "oracle.steps": "--oracle-steps",
     "oracle.learning_rate": "--oracle-lr",
@@ -327,6 +328,16 @@ def _add_arm_options(p: argparse.ArgumentParser) -> None:
         " with --simulator rod (default: --target-domain)",
     )
     p.add_argument(
+        "--taught-medium-rtol",
+        type=float,
+        default=EvalConfig.taught_medium_rtol,
+        metavar="R",
+        help="with --target-domain-file: score 'identified' translators taught on a medium whose"
+        " numeric Domain fields are within R (relative) of the file's, e.g. 0.05 to score a"
+        " translator built from a target's data (its identified medium) in the true medium"
+        " (default: %(default)s, the same fields only)",
+    )
+    p.add_argument(
         "--ccgan-path",
         metavar="CKPT",
         default=None,
@@ -459,6 +470,7 @@ def parse_args(argv: list[str] | None = None) -> EvalConfig:
             trust_unlabelled_translators=a.trust_unlabelled_translators,
             target_domain=a.target_domain,
             target_domain_file=a.target_domain_file,
+            taught_medium_rtol=a.taught_medium_rtol,
             oracle=OracleConfig(
                 steps=a.oracle_steps,
                 learning_rate=a.oracle_lr,

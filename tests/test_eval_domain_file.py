@@ -123,6 +123,31 @@ def test_identified_translators_load_only_for_the_same_domain_fields(small_xml, 
         methods.load_translator("ccgan_ident", builtin)
 
 
+def test_a_taught_medium_within_the_tolerance_is_scored_in_the_true_one(
+    small_xml, identified_files
+):
+    """`taught_medium_rtol`: a translator taught on an identified medium is scored in the true
+    one when each field is within the relative tolerance ("other" is taught at stiffness 0.7
+    against the file's 0.8: 12.5%); beyond it, and with no tolerance, it is refused."""
+    target, files = identified_files
+
+    def load(rtol):
+        cfg = pipeline.EvalConfig(
+            ccgan_ident_path=files["other"], xml=small_xml, seeds=(0,), target_domain_file=target,
+            taught_medium_rtol=rtol,
+        )  # fmt: skip
+        return methods.load_translator("ccgan_ident", cfg)
+
+    tr, why = load(0.2)
+    assert tr is not None and tr.labels[0]["taught_domain"]["domain"]["stiffness_scale"] == 0.7
+    with pytest.raises(methods.TranslatorError, match="more than --taught-medium-rtol 0.1"):
+        load(0.1)
+    with pytest.raises(methods.TranslatorError, match=r"stiffness_scale 0\.7 \(here 0\.8\)"):
+        load(0.0)
+    with pytest.raises(ConfigError, match="taught_medium_rtol"):
+        load(-0.1)
+
+
 # ------------------------------------------------------------------ scored in the file's medium
 
 

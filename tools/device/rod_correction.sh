@@ -123,7 +123,8 @@ offpair) # (c): a translator for each medium off the pair, taught on the arm ide
   # 50 of its programs (committed: studies/results/h200/aged_identified/identify_50/), k chosen
   # there, the two at once; SIGTERM at OFFPAIR_LIMIT_S, rerun to go on (teacher by shard, the
   # training by its state). Scored afterwards in the true medium on any CPU: eval.shapes
-  # --target-domain-file with the truth (not yet run).
+  # --target-domain-file TRUTH.json --taught-medium-rtol 0.05 --methods none stretch ccgan_ident
+  # --identified-path .../distill/translator.ckpt (docs/identification.md; not yet run).
   pids=() status=0
   for c in half_drag double_drag; do
     mkdir -p "$RUN/offpair/$c"
