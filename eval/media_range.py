@@ -17,7 +17,8 @@ The programs are `--programs shape_like` (default: `--n-programs` shape-like pro
 stream no translator is taught on, "media_range/test") or `shapes` (the paper's five test shapes,
 to be scored once, at the end). Each medium's role (training, held out, or neither) is read
 from the translator's file. Writes PREFIX.json, PREFIX.md (the table) and PREFIX.png (X_err and
-k against r).
+k against r). `--merge A.json B.json --out PREFIX` writes one table of runs that scored
+different media (e.g. in two processes, each pinned to a core).
 
     python -m eval.media_range --translators DIR/translator_seed{0,1,2}.ckpt --out PREFIX \\
         [--media 10 1 10 0.7 ...] [--programs shapes --duration 60] \\
@@ -163,10 +164,13 @@ def score_media(
 def table_lines(rows: list[dict], reference_labels: list[str]) -> list[str]:
     """The markdown table of `score_media`'s rows."""
     refs = "".join(f" {label} |" for label in reference_labels)
+    ratio = " conditioned / per-medium |" if reference_labels else ""
     lines = [
         "| r | s | role | t63 s (fit / measured) | k (rule / from measured t63) |"
-        " conditioned X_err cm (seeds) | stretch only X_err cm | conditioned / stretch |" + refs,
-        "|---|---|---|---|---|---|---|---|" + "---|" * len(reference_labels),
+        " conditioned X_err cm (seeds) | stretch only X_err cm | conditioned / stretch |"
+        + refs
+        + ratio,
+        "|---|---|---|---|---|---|---|---|" + "---|" * (len(reference_labels) + bool(ratio)),
     ]
     for row in rows:
         e = row["x_err_cm"]
@@ -174,6 +178,9 @@ def table_lines(rows: list[dict], reference_labels: list[str]) -> list[str]:
         ref_cells = "".join(
             f" {e[label]:.3f} |" if label in e else " - |" for label in reference_labels
         )
+        if ratio:
+            here = [e[label] for label in reference_labels if label in e]
+            ref_cells += f" {e['conditioned_mean'] / min(here):.2f} |" if here else " - |"
         lines.append(
             f"| {row['r']:.3g} | {row['s']:.3g} | {row['role']} |"
             f" {row['t63_fit_s']:.1f} / {row['t63_measured_s']:.1f} |"
@@ -183,9 +190,20 @@ def table_lines(rows: list[dict], reference_labels: list[str]) -> list[str]:
     return lines
 
 
+#: The X_err entries of a row that are not per-medium translators.
+OWN_ENTRIES = ("conditioned", "conditioned_mean", "stretch")
+
+
+def reference_labels(row: dict) -> list[str]:
+    """The per-medium translators scored at a row's medium (its X_err entries beyond
+    `OWN_ENTRIES`)."""
+    return [label for label in row["x_err_cm"] if label not in OWN_ENTRIES]
+
+
 def plot(rows: list[dict], path: Path) -> None:
-    """X_err (conditioned: filled, stretch only: open) and k against r, coloured by s, squares
-    for training media and circles for the others (PNG at `path`)."""
+    """X_err (conditioned: filled, stretch only: open, per-medium translators: crosses) and k
+    against r, coloured by s, squares for training media and circles for the others (PNG at
+    `path`)."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -203,6 +221,8 @@ def plot(rows: list[dict], path: Path) -> None:
         marker = "s" if row["role"] == "training" else "o"
         ax_e.plot(row["r"], row["x_err_cm"]["conditioned_mean"], marker, color=c)
         ax_e.plot(row["r"], row["x_err_cm"]["stretch"], marker, mfc="none", color=c)
+        for label in reference_labels(row):
+            ax_e.plot(row["r"], row["x_err_cm"][label], "x", color=c, markersize=8)
         ax_k.plot(row["r"], row["k"], marker, color=c)
     ax_e.set_title("X_err (cm), MuJoCo C")
     ax_k.set_title("k (the rule, 0.526 t63)")
@@ -218,6 +238,11 @@ def plot(rows: list[dict], path: Path) -> None:
             Line2D([], [], marker="o", label="conditioned", **grey),
             Line2D([], [], marker="o", mfc="none", label="stretch only", **grey),
             Line2D([], [], marker="s", label="training medium", **grey),
+            *(
+                [Line2D([], [], marker="x", label="per-medium translator", **grey)]
+                if any(reference_labels(row) for row in rows)
+                else []
+            ),
         ],
         fontsize=8,
     )
@@ -234,8 +259,13 @@ def build_parser() -> argparse.ArgumentParser:
         description=__doc__.strip().splitlines()[0],
         formatter_class=HelpFormatter,
     )
+    p.add_argument("--translators", nargs="+", help="conditioned translator files, one per seed")
     p.add_argument(
-        "--translators", nargs="+", required=True, help="conditioned translator files, one per seed"
+        "--merge",
+        nargs="+",
+        metavar="JSON",
+        help="instead of scoring: one table, plot and json of these runs' PREFIX.json (media"
+        " scored in separate processes), which must share translators, programs and range",
     )
     p.add_argument("--out", required=True, help="output prefix (writes .json, .md and .png)")
     p.add_argument("--model", default=str(constants.TRANSLATOR_MODEL_PATH), help="the chain's MJCF")
@@ -268,6 +298,18 @@ def main(argv: list[str] | None = None) -> None:
     """CLI (the module doc)."""
     p = build_parser()
     a = p.parse_args(argv)
+    if a.merge:
+        if a.translators:
+            p.error("--merge writes a table of earlier runs: give no --translators")
+        try:
+            parts = [json.loads(Path(path).read_text()) for path in a.merge]
+            merged = merge_results(parts, a.merge)
+        except (OSError, ValueError, KeyError) as err:
+            p.error(f"--merge: {err}")
+        write_outputs(Path(a.out), merged)
+        return
+    if not a.translators:
+        p.error("--translators is required (or --merge)")
     if a.n_programs < 1 or not a.duration > 0:
         p.error(f"--n-programs >= 1 and --duration > 0, got {a.n_programs}, {a.duration}")
     try:
@@ -313,22 +355,35 @@ def main(argv: list[str] | None = None) -> None:
         "translators": a.translators,
         "model": a.model,
         "programs": names,
+        "programs_kind": a.programs,
         "duration_s": a.duration,
         "media_range": rule.to_dict(),
         "rows": rows,
         "wall_s": time.perf_counter() - t0,
     }
-    out = Path(a.out)
+    write_outputs(Path(a.out), result)
+
+
+#: What every part of a merge must share (`merge_results`).
+SHARED_KEYS = ("translators", "model", "programs", "duration_s", "media_range")
+
+
+def write_outputs(out: Path, result: dict) -> None:
+    """PREFIX.json (`result`), PREFIX.md (the table) and PREFIX.png (`plot`) at prefix `out`."""
     out.parent.mkdir(parents=True, exist_ok=True)
-    labels = [label for _, _, label, _ in references]
+    rows = result["rows"]
+    labels = list(dict.fromkeys(label for row in rows for label in reference_labels(row)))
+    header = {key: result[key] for key in ("machine", "command", "merged_from") if key in result}
     lines = [
-        f"# Error against the medium: {len(translators)} seeds of a conditioned translator",
+        f"# Error against the medium: {len(result['translators'])} seeds of a conditioned"
+        " translator",
         "",
         *(f"- {key}: {value}" for key, value in header.items()),
         "",
-        f"X_err (cm, MuJoCo C, the chain of {a.model} in each medium) over {len(names)}"
-        f" {a.programs} programs of {a.duration:g} s; every method holds the rule's k (stretch"
-        " only's too; references their own k).",
+        f"X_err (cm, MuJoCo C, the chain of {result['model']} in each medium) over"
+        f" {len(result['programs'])} {result.get('programs_kind', 'shape_like')} programs of"
+        f" {result['duration_s']:g} s; every method holds the rule's k (stretch only's too;"
+        " references their own k).",
         "",
         *table_lines(rows, labels),
         "",
@@ -340,6 +395,35 @@ def main(argv: list[str] | None = None) -> None:
     write_atomically(out.with_suffix(".md"), lambda f: f.write(text))
     plot(rows, out.with_suffix(".png"))
     print("\n".join(lines))
+
+
+def merge_results(parts: list[dict], paths: list[str]) -> dict:
+    """One result of several runs' (`--merge`: media scored in separate processes or machines),
+    their rows in the order given; the wall time is the sum of theirs.
+
+    Raises:
+      ValueError: the parts differ in translators, model, programs, length or range, or score
+        a medium twice.
+    """
+    first = parts[0]
+    for path, part in zip(paths[1:], parts[1:], strict=True):
+        differ = [key for key in SHARED_KEYS if part.get(key) != first.get(key)]
+        if differ:
+            raise ValueError(f"{path} differs from {paths[0]} in {', '.join(differ)}")
+    rows = [row for part in parts for row in part["rows"]]
+    media_seen = [(row["r"], row["s"]) for row in rows]
+    twice = sorted({m for m in media_seen if media_seen.count(m) > 1})
+    if twice:
+        raise ValueError(f"media scored in more than one part: {twice}")
+    machines = sorted({part["machine"] for part in parts})
+    return {key: first[key] for key in SHARED_KEYS} | {
+        "machine": "; ".join(machines),
+        "command": " ; ".join(part["command"] for part in parts),
+        "merged_from": ", ".join(paths),
+        "programs_kind": first.get("programs_kind", "shape_like"),
+        "rows": rows,
+        "wall_s": float(sum(part["wall_s"] for part in parts)),
+    }
 
 
 if __name__ == "__main__":

@@ -425,3 +425,42 @@ def test_step_times_are_the_same_measured_at_once(constrained_arm, monkeypatch):
     at_once = measure_media(constrained_arm, points, log=lambda _: None)
     assert at_once == one_by_one and at_once[0].k == 5
     assert at_once[1].t63_s > at_once[0].t63_s  # softer and slower than (2, 1)
+
+
+def test_runs_of_other_media_merge_into_one_table(tmp_path, capsys):
+    """`python -m eval.media_range --merge`: two runs' media in one table (the per-medium
+    translator's column and its ratio where one was scored) and plot; parts of other
+    translators, or scoring one medium twice, are refused."""
+
+    def row(r, s, refs=None):
+        x = {"conditioned": [0.2, 0.4], "conditioned_mean": 0.3, "stretch": 0.6} | (refs or {})
+        return {
+            "r": r, "s": s, "role": "held out", "t63_fit_s": 30.0, "t63_measured_s": 30.5,
+            "k": 15, "k_measured": 15, "x_err_cm": x, "per_program_cm": {},
+        }  # fmt: skip
+
+    shared = {"translators": ["a.ckpt", "b.ckpt"], "model": "m.xml", "programs": ["p0"]}
+    shared |= {"duration_s": 60.0, "media_range": {"drag_ratio_range": [2.0, 30.0]}}
+    parts = [
+        shared | {"machine": "cpu A", "command": "c1", "wall_s": 10.0,
+                  "rows": [row(10.0, 1.0, {"per-medium D_c": 0.2})]},
+        shared | {"machine": "cpu A", "command": "c2", "wall_s": 5.0, "rows": [row(2.0, 0.6)]},
+    ]  # fmt: skip
+    paths = []
+    for i, part in enumerate(parts):
+        paths.append(str(tmp_path / f"part{i}.json"))
+        (tmp_path / f"part{i}.json").write_text(json.dumps(part))
+    scoring.main(["--merge", *paths, "--out", str(tmp_path / "all")])
+    table = (tmp_path / "all.md").read_text()
+    assert "| 10 | 1 | held out |" in table and "| 2 | 0.6 | held out |" in table
+    assert "per-medium D_c | conditioned / per-medium |" in table and "| 0.200 | 1.50 |" in table
+    merged = json.loads((tmp_path / "all.json").read_text())
+    assert merged["wall_s"] == 15.0 and len(merged["rows"]) == 2
+    assert (tmp_path / "all.png").stat().st_size > 0
+    (tmp_path / "other.json").write_text(json.dumps(parts[1] | {"translators": ["c.ckpt"]}))
+    with pytest.raises(SystemExit):
+        scoring.main(["--merge", paths[0], str(tmp_path / "other.json"), "--out", "x"])
+    assert "differs from" in capsys.readouterr().err
+    with pytest.raises(SystemExit):
+        scoring.main(["--merge", paths[0], paths[0], "--out", "x"])
+    assert "more than one part" in capsys.readouterr().err
