@@ -17,6 +17,9 @@ Program families (never a test shape):
   held (`mjx_arm.programs.held_program`: all chambers together, holds of 1-4 s, seeds 7000+),
   families that no distillation of the chain trains on (its `n_train_babble` is 0).
 
+`--simulator chain` scores in the chain of --model (MuJoCo C) instead, against the chain's own
+D_s path: the same families for a target the chain holds (the aged arm, a medium off the pair).
+
 Beside each translator's error against the rod's D_s path, its error against the chain's D_s
 path of the same program (`--diagnose`): a translator taught to trace the chain's D_s path
 (`ccgan.distill`'s default `--source-simulator chain`) inherits the chain's D_s model error,
@@ -81,7 +84,8 @@ def programs_by_family(
 
 def held_rollouts(rod_c, runs: list[tuple[np.ndarray, int]]) -> list[np.ndarray]:
     """Poses [T, 6] (every k-th, m) of each (commands [T, 3] per source step, k) held k periods
-    in `rod_c`; runs of one k share one batched rollout."""
+    in `rod_c` (a rod arm, or any arm whose `rollout(commands [B, N, 3])` returns poses
+    [B, N, 6]: `chain_in_c`); runs of one k share one batched rollout."""
     by_k = defaultdict(list)
     for i, (_, k) in enumerate(runs):
         by_k[k].append(i)
@@ -105,6 +109,17 @@ def parse_translators(p, specs: list[str]) -> dict[str, list[str]]:
     return out
 
 
+class chain_in_c:  # noqa: N801  (stands where a rod arm stands)
+    """The chain `arm` as `held_rollouts` and the D_s path call a rod arm: its `rollout` in
+    MuJoCo C (multi-threaded), for `--simulator chain`."""
+
+    def __init__(self, arm):
+        self.arm = arm
+
+    def rollout(self, commands: np.ndarray) -> np.ndarray:
+        return self.arm.rollout(commands, backend="c")
+
+
 def family_table(families: list[str], errors: dict[str, np.ndarray]) -> dict[str, dict]:
     """{family: {column: mean X_err (cm)}} with an "all" row, from per-program errors [N]."""
     rows = {}
@@ -126,19 +141,32 @@ def main(argv=None) -> None:
     p.add_argument("--duration-s", type=float, default=60.0)
     p.add_argument("--model", default="models/softarm.xml", help="the chain (for --diagnose)")
     p.add_argument("--diagnose", action="store_true", help="also score against the chain's D_s")
+    p.add_argument(
+        "--simulator",
+        choices=("rod", "chain"),
+        default="rod",
+        help="the arm scored: the reference rod, or the chain of --model in MuJoCo C (e.g. the"
+        " aged arm's held-out families, issue 50 (b)); its own D_s path is the target",
+    )
     p.add_argument("--out", required=True, help="output prefix (writes .json and .md)")
     a = parse_checked_args(p, argv)
     if a.stretch_k < 1 or a.n_shape_like < 0 or a.n_other < 0 or a.duration_s <= 0:
         p.error("--stretch-k must be >= 1, the counts >= 0 and --duration-s > 0")
     if a.n_shape_like + a.n_other == 0:
         p.error("--n-shape-like and --n-other are both 0: no program to score")
+    if a.diagnose and a.simulator == "chain":
+        p.error("--diagnose compares the chain with the rod: not with --simulator chain")
     specs = parse_translators(p, a.translators)
     translators = {name: [load_translator(path) for path in paths] for name, paths in specs.items()}
     t0 = time.perf_counter()
     programs, families = programs_by_family(a.n_shape_like, a.n_other, a.duration_s)
-    rod_s, rod_c = mjx_arm.load_rod("source"), mjx_arm.load_rod(a.target_domain)
+    if a.simulator == "rod":
+        rod_s, rod_c = mjx_arm.load_rod("source"), mjx_arm.load_rod(a.target_domain)
+    else:
+        rod_s, rod_c = (chain_in_c(mjx_arm.load(a.model, d)) for d in ("source", a.target_domain))
+    where = "the rod" if a.simulator == "rod" else f"the chain of {a.model} (MuJoCo C)"
     x_rod = rod_s.rollout(programs)
-    print(f"{len(programs)} programs' D_s paths in the rod ({time.perf_counter() - t0:.0f} s)")
+    print(f"{len(programs)} programs' D_s paths in {where} ({time.perf_counter() - t0:.0f} s)")
     errors = {}
     if a.diagnose:
         x_chain = mjx_arm.load(a.model, "source").rollout(programs, backend="c")
@@ -154,7 +182,7 @@ def main(argv=None) -> None:
                 owners.append((name, s_i))
             ks[name] = k
     poses = held_rollouts(rod_c, runs)
-    print(f"{len(runs)} rollouts in the rod ({time.perf_counter() - t0:.0f} s)")
+    print(f"{len(runs)} rollouts in {where} ({time.perf_counter() - t0:.0f} s)")
     n = len(programs)
     errors["stretch"] = position_error_cm(np.stack(poses[:n]), x_rod).mean(-1)
     for name, seeds in translators.items():
@@ -170,7 +198,7 @@ def main(argv=None) -> None:
     lines = [
         "",
         f"X_err (cm, mean over each program and then the family's programs; translators: mean"
-        f" of their seeds) in the rod in {a.target_domain} against the rod's D_s path;"
+        f" of their seeds) in {where} in {a.target_domain} against its own D_s path;"
         f" {a.duration_s:g} s programs; k: "
         + ", ".join(f"{name} {k}" for name, k in ks.items())
         + f". Families {', '.join(UNSEEN_FAMILIES)} are in no chain distillation's training.",
@@ -194,12 +222,13 @@ def main(argv=None) -> None:
         "translators": specs,
         "k": ks,
         "target_domain": a.target_domain,
+        "simulator": a.simulator,
         "families": families,
         "per_program_x_err_cm": {c: e.tolist() for c, e in errors.items()},
         "rows": rows,
         "wall_s": time.perf_counter() - t0,
     }
-    title = "Translators scored in the reference rod on held-out programs, by family"
+    title = f"Translators scored in {where} on held-out programs, by family"
     print("\n".join(lines))
     write_results(a.out, header, result, title, lines)
 

@@ -21,3 +21,27 @@ def test_no_program_at_all_is_refused_before_any_work(capsys):
         rod_transfer.main(["--translators", "x=y.ckpt", "--n-shape-like", "0", "--n-other", "0",
                            "--out", "/tmp/never"])  # fmt: skip
     assert "no program to score" in capsys.readouterr().err
+
+
+def test_the_chain_scores_the_families_in_its_own_medium(tmp_path):
+    """`--simulator chain --target-domain aged`: stretch only's X_err per family is the aged
+    chain's in MuJoCo C against the chain's own D_s path, computed here directly."""
+    import json
+
+    import mjx_arm
+    from tracking.held import run_dc, stretch
+    from tracking.metrics import position_error_cm
+
+    translator = "results/paper/rerun_2026-11-27/run/aged_sim/translator_seed0.ckpt"
+    rod_transfer.main([
+        "--translators", f"aged_sim={translator}", "--target-domain", "aged",
+        "--simulator", "chain", "--stretch-k", "5", "--n-shape-like", "0", "--n-other", "1",
+        "--duration-s", "2", "--out", str(tmp_path / "t"),
+    ])  # fmt: skip
+    result = json.loads((tmp_path / "t.json").read_text())
+    programs, _ = rod_transfer.programs_by_family(0, 1, 2.0)
+    targets = mjx_arm.load(domain="source").rollout(programs, backend="c")
+    poses = run_dc(mjx_arm.load(domain="aged"), stretch(programs, 5), 5, "c")
+    want = position_error_cm(poses, targets).mean(-1)
+    np.testing.assert_allclose(result["per_program_x_err_cm"]["stretch"], want, rtol=1e-9)
+    assert result["simulator"] == "chain" and result["k"]["aged_sim"] == 25
