@@ -11,7 +11,8 @@ per seed) in the true simulator of each medium: the chain of --model in medium (
 - stretch only: the D_s program held the same k (the rule's k is stretch only's best on the 14
   media `studies.k_by_medium` measured, to its grid of 5);
 - optionally per-medium translators (`--reference R S FILE`: a translator of one pair, e.g. the
-  chain's distilled D_c one at 10 1), each at its own k.
+  chain's distilled D_c one at 10 1), each at its own k, the mean of its seeds' files
+  (translator_seed<s>.ckpt beside FILE) where there are.
 
 The programs are `--programs shape_like` (default: `--n-programs` shape-like programs of a
 stream no translator is taught on, "media_range/test") or `shapes` (the paper's five test shapes,
@@ -103,7 +104,8 @@ def score_media(
       arm_c: the D_c arm of the chain they were taught on (its MJCF; `medium_arm`).
       media_list: (r, s) pairs inside the translators' range.
       pressures_s: [P, T, 3] D_s programs (bar); targets: [P, T, 6] their D_s poses.
-      references: (r, s, label, translator of one pair) scored at that medium at its own k.
+      references: (r, s, label, translator of one pair, or a list of its seeds' translators)
+        scored at that medium at its own k (a list: the mean over its seeds, per program).
 
     Returns:
       per medium {"r", "s", "role", "t63_fit_s", "t63_measured_s", "k", "k_measured",
@@ -132,11 +134,15 @@ def score_media(
         }
         for r_ref, s_ref, label, reference in references:
             if math.isclose(r_ref, r) and math.isclose(s_ref, s):
-                held = [
-                    reference.translate(p, x) for p, x in zip(pressures_s, targets, strict=True)
-                ]
-                commands = np.stack([c for c, _ in held])
-                per_program[label] = x_err_cm(arm, commands, reference.k, targets)
+                members = list(reference) if isinstance(reference, (list, tuple)) else [reference]
+                errors = []
+                for member in members:  # its seeds' files, or one file
+                    held = [
+                        member.translate(p, x) for p, x in zip(pressures_s, targets, strict=True)
+                    ]
+                    commands = np.stack([c for c, _ in held])
+                    errors.append(x_err_cm(arm, commands, member.k, targets))
+                per_program[label] = np.mean(errors, axis=0)
         means = {name: float(v.mean()) for name, v in per_program.items()}
         means["conditioned"] = per_program["conditioned"].mean(-1).tolist()
         means["conditioned_mean"] = float(per_program["conditioned"].mean())
@@ -317,16 +323,19 @@ def main(argv: list[str] | None = None) -> None:
             load_translator(path, method="distill_range", target_domain=MEDIA_RANGE)
             for path in a.translators
         ]
-        references = [
-            (float(r), float(s), f"per-medium {Path(f).parent.name or f} (k {t.k})", t)
-            for r, s, f in a.reference
-            for t in [load_translator(f, source_domain="source")]
-        ]
+        references = []
+        for r, s, f in a.reference:
+            # Its seeds' files beside it (translator_seed<s>.ckpt), as eval.shapes reads them.
+            files = sorted(Path(f).parent.glob("translator_seed*.ckpt")) or [Path(f)]
+            seeds = [load_translator(file, source_domain="source") for file in files]
+            name = Path(f).parent.name or f
+            label = f"per-medium {name} (k {seeds[0].k}, {len(seeds)} seed{'s' * (len(seeds) > 1)})"
+            references.append((float(r), float(s), label, seeds))
     except (CheckpointError, ValueError) as err:
         p.error(str(err))
     if any(t.media != translators[0].media for t in translators):
         p.error("--translators record different ranges: give the seeds of one run")
-    if any(t.conditioned for *_, t in references):
+    if any(t.conditioned for *_, seeds in references for t in seeds):
         p.error("--reference takes translators of one pair, not conditioned ones")
     rule = translators[0].media
     if a.media is None:

@@ -271,8 +271,13 @@ def test_scoring_runs_each_medium_in_its_own_arm_at_the_rules_k(
     targets = source_arm.rollout(pressures, backend="c")
     rows = scoring.score_media(
         [wide], constrained_arm, [(2.0, 1.0), (10.0, 0.7)], pressures, targets,
-        references=[(10.0, 0.7, "D_c's", plain)], log=lambda *_: None,
+        references=[(10.0, 0.7, "D_c's", plain), (10.0, 0.7, "twice", [plain, plain])],
+        log=lambda *_: None,
     )  # fmt: skip
+    # A reference given as its seeds' translators is their mean: two of one file, that file.
+    assert rows[1]["x_err_cm"]["twice"] == rows[1]["x_err_cm"]["D_c's"]
+    for row in rows:
+        row["x_err_cm"].pop("twice", None)
     assert [row["role"] for row in rows] == ["training", "other"]
     for row, (r, s, k) in zip(rows, ((2.0, 1.0, 5), (10.0, 0.7, 25)), strict=True):
         arm = mjx_arm.load(
@@ -464,3 +469,16 @@ def test_runs_of_other_media_merge_into_one_table(tmp_path, capsys):
     with pytest.raises(SystemExit):
         scoring.main(["--merge", paths[0], paths[0], "--out", "x"])
     assert "more than one part" in capsys.readouterr().err
+
+
+def test_a_reference_is_scored_over_its_seeds_files(tmp_path, capsys):
+    """`--reference R S FILE` reads the translator_seed<s>.ckpt beside FILE (the committed
+    aged_sim's three) and labels the column with their number."""
+    aged = "results/paper/rerun_2026-11-27/run/aged_sim/translator.ckpt"
+    translator = "studies/results/h200/media_range/range/translator_seed0.ckpt"
+    scoring.main([
+        "--translators", translator, "--out", str(tmp_path / "t"), "--media", "10", "0.7",
+        "--n-programs", "1", "--duration", "2", "--reference", "10", "0.7", aged,
+    ])  # fmt: skip
+    row = json.loads((tmp_path / "t.json").read_text())["rows"][0]
+    assert "per-medium aged_sim (k 25, 3 seeds)" in row["x_err_cm"]
