@@ -272,7 +272,7 @@ def load_translator(method: str, cfg, target_file=None) -> tuple[TranslatorMetho
       method: one of TRANSLATOR_METHODS.
       cfg: an `eval.pipeline.EvalConfig`; its paths and seeds are read.
       target_file: the `mjx_arm.domains.DomainFile` of cfg.target_domain_file as already read
-        (`eval.pipeline.read_target_file`); None reads it here.
+        (`eval.target.read_target_file`); None reads it here.
 
     Returns:
       (translator, "loaded" or what was loaded) or (None, why).

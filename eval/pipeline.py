@@ -11,10 +11,7 @@ With EvalConfig.simulator "rod" the reference Cosserat rod (the paper's law, flo
 the table instead of the fitted chain: targets, stretch k and every D_c rollout (`eval.rod`).
 
 With EvalConfig.target_domain_file D_c is the chain in a Domain read from a JSON file
-(`mjx_arm.domains.read_domain_file`, named "identified"), not a built-in medium: stretch only's
-k, every method's D_c rollouts, the tracker and the oracle run there, by the same code as for a
-named domain, and shapes.json ("target_domain_file") and shapes.md record the file's path,
-sha256 and fields.
+(`eval.target`): every method runs there, by the same code as for a named domain.
 
 This module holds what is evaluated (`EvalConfig`) and how (`evaluate`: load, plan, then the
 simulator steps of `eval.simulate`, then write); the report is `eval.report`, the command line
@@ -32,8 +29,7 @@ from pathlib import Path
 import numpy as np
 
 import mjx_arm  # (before jax: sets the XLA CPU flag)
-from ccgan.media_range import K_PER_T63_S
-from eval import rod
+from eval import rod, target
 from eval.methods import (
     DEFAULT_METHODS,
     METHOD_NAMES,
@@ -56,6 +52,7 @@ from eval.simulate import (
     score,
     start_oracle,
 )
+from eval.target import medium_note, read_target_file, target_file_record
 from mjx_arm import constants, domains, programs
 from tracking.config import check_duration, check_fields, check_ints, require
 from tracking.held import choose_stretch_k, rollout_grouped
@@ -150,18 +147,14 @@ class EvalConfig:
     target_domain: str = "constrained"
     """The domain translated into (D_c): "constrained", or "aged" for the second pair."""
     target_domain_file: str | None = None
-    """A Domain JSON file (`mjx_arm.domains.read_domain_file`: an identify.json or
-    ``{"domain": {...}}``) whose Domain D_c is instead of target_domain's: the chain in it scores
-    the table, stretch only's k is chosen there and every method runs there; its record goes
-    into shapes.json and shapes.md (`target_file_record`). Translators must then be labelled
-    "identified" and taught on the same Domain fields (`eval.methods.load_translator`). Not
-    with a target_domain other than the default, nor with simulator "rod" (None: target_domain)."""
+    """A Domain JSON file (an identify.json or ``{"domain": {...}}``) whose Domain D_c is instead
+    of target_domain's; recorded in shapes.json and shapes.md. Translators must be labelled
+    "identified" and taught on the same fields (`eval.methods.load_translator`), or be
+    ccgan_range. Not with another target_domain, nor with simulator "rod" (`eval.target`)."""
     taught_medium_rtol: float = 0.0
-    """How far (relative, per numeric Domain field) an "identified" translator's taught medium
-    may be from target_domain_file's and still be scored there. 0: the same fields only. A
-    translator built from a target's data alone is taught on the identified medium and scored
-    in the true one, which the identification gets to within a tolerance (issue 50 asks 5%):
-    give that tolerance; each file's taught fields are recorded beside the truth either way."""
+    """With target_domain_file: how far (relative, per numeric field) an "identified"
+    translator's taught medium may be from the file's (0: the same fields), so that one built
+    from a target's data is scored in the true medium (issue 50's identification: 5%)."""
     ccgan_path: str | None = None
     """Checkpoint for ccgan.load_translator (None: the translator's default)."""
     wcgan_path: str | None = None
@@ -229,58 +222,13 @@ class EvalConfig:
             _check_file(field, getattr(self, field))
         require(isinstance(self.oracle, OracleConfig), "oracle", "must be an OracleConfig")
         rod.check_simulator(self)
-        _check_target_file(self)
+        target.check_target_file(self)
         require(
             self.oracle.held or "oracle" in self.methods,
             "oracle.held",
             "(a command per control period) sets the oracle, which is not among the methods: add"
             " oracle to --methods or leave the flag out",
         )
-
-
-def _check_target_file(cfg: EvalConfig) -> None:
-    """target_domain_file: a readable Domain file (`read_target_file`), given instead of a
-    target_domain (left at its default), for the chain (the rod has only its named media)."""
-    if cfg.target_domain_file is None:
-        return
-    default = EvalConfig.__dataclass_fields__["target_domain"].default
-    require(
-        cfg.target_domain == default,
-        "target_domain_file",
-        f"gives D_c instead of target_domain, which must stay {default!r} (got"
-        f" {cfg.target_domain!r}): give one or the other",
-    )
-    require(
-        cfg.simulator != "rod",
-        "target_domain_file",
-        "is a medium of the chain: the rod (simulator 'rod') has only its own named media"
-        " (target_domain constrained or aged)",
-    )
-    try:
-        read_target_file(cfg)
-    except (OSError, ValueError) as err:
-        require(False, "target_domain_file", f"is unusable: {err}")
-
-
-def read_target_file(cfg: EvalConfig):
-    """The `mjx_arm.domains.DomainFile` of cfg.target_domain_file (its Domain named
-    "identified"), or None without one.
-
-    Raises:
-      FileNotFoundError, ValueError: as `mjx_arm.domains.read_domain_file`.
-    """
-    if cfg.target_domain_file is None:
-        return None
-    return domains.read_domain_file(cfg.target_domain_file)
-
-
-def target_file_record(target_file, arm_s, arm_c) -> dict:
-    """shapes.json's "target_domain_file": the file's record (`DomainFile.record`: path, sha256,
-    identification method, every Domain field) and "values", the D_c arm's physical values
-    (`mjx_arm.domains.physical_values`: viscosity over the source medium's, stiffness and mass
-    factors), comparable with the built-in media's."""
-    values = domains.physical_values(arm_c.mj_model, arm_s.mj_model, arm_c.domain)
-    return target_file.record() | {"values": values}
 
 
 def quick(cfg: EvalConfig) -> EvalConfig:
@@ -449,15 +397,8 @@ def load_arms(cfg: EvalConfig, target_file=None):
     target = cfg.target_domain
     if cfg.target_domain_file is not None:
         target = (target_file or read_target_file(cfg)).domain
-    if cfg.xml is not None:
-        return (
-            mjx_arm.load(xml=cfg.xml, domain="source"),
-            mjx_arm.load(xml=cfg.xml, domain=target),
-        )
-    return (
-        mjx_arm.load(cfg.model_path, domain="source"),
-        mjx_arm.load(cfg.model_path, domain=target),
-    )
+    arm = {"xml": cfg.xml} if cfg.xml is not None else {"path": cfg.model_path}
+    return mjx_arm.load(domain="source", **arm), mjx_arm.load(domain=target, **arm)
 
 
 def evaluate(cfg: EvalConfig, command: str = "", log=print) -> dict:
@@ -490,13 +431,9 @@ def evaluate(cfg: EvalConfig, command: str = "", log=print) -> dict:
         "simulator": cfg.simulator,
         "backend": plan.backend,
         "model_hash": plan.arm_s.model_hash,
-        **({"rod": _rod_description(plan)} if rods is not None else {}),
+        **({"rod": rod.rod_description(plan)} if rods is not None else {}),
         "model": model,
-        **(
-            {"target_domain_file": target_file_record(target_file, arm_s, arm_c)}
-            if target_file is not None
-            else {}
-        ),
+        **target_file_record(target_file, arm_s, arm_c),
         "config": dataclasses.asdict(cfg)
         | {"xml": None if cfg.xml is None else "custom", "model_path": model["file"]},
         "methods_run": plan.methods,
@@ -617,38 +554,6 @@ def _plan(cfg: EvalConfig, arm_s, arm_c, translators: dict, run: RunLog, rods=No
         rollout_backend=backend,
         tracker_arm=arm_c if rods is not None else None,
     )
-
-
-def medium_note(method: str, medium: dict) -> str:
-    """The note of a conditioned translator's medium (`eval.methods.medium_record`): the (r, s)
-    it translates into, what that medium is to its range, and the k its rule holds."""
-    span = medium["range"]
-    role = {
-        "training": "one of its training media",
-        "held out": "one of its held-out media",
-    }.get(medium["role"], "neither a training nor a held-out medium")
-    return (
-        f"{method.upper()}: translates into this run's D_c as drag ratio r ="
-        f" {medium['drag_ratio']:.4g}, stiffness s = {medium['stiffness_scale']:.4g} (inside its"
-        f" range r {span['drag_ratio']}, s {span['stiffness_scale']}; {role}), each command"
-        f" held its rule's k = {medium['k']} (the grid's nearest to {K_PER_T63_S} x the fitted"
-        f" 63% step time {medium['t63_s']:.1f} s)."
-    )
-
-
-def _rod_description(plan: Plan) -> dict:
-    """shapes.json's "rod": the rod that scored the table, the chain the tracker planned in,
-    and the arm each translator was trained on (`eval.rod.trained_on`)."""
-    chain_hash = plan.tracker_arm.model_hash
-    return {
-        "scored_in": rod.SCORED_IN["rod"],
-        "model_hash": plan.arm_c.model_hash,
-        "dtype": plan.arm_c.dtype,
-        "chain_model_hash": chain_hash,
-        "translators_trained_on": rod.trained_on(
-            plan.translators, chain_hash, plan.arm_c.model_hash
-        ),
-    }
 
 
 def _write(plan: Plan, results: dict, trajectories: dict, run: RunLog, t_start: float) -> None:

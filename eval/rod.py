@@ -147,3 +147,16 @@ def rod_note(cfg, default_model: bool) -> str | None:
         return None
     text = "; ".join(parts)
     return text[0].upper() + text[1:] + "."
+
+
+def rod_description(plan) -> dict:
+    """shapes.json's "rod": the rod that scored the table, the chain the tracker planned in,
+    and the arm each translator was trained on (`trained_on`; plan: `eval.pipeline.Plan`)."""
+    chain_hash = plan.tracker_arm.model_hash
+    return {
+        "scored_in": SCORED_IN["rod"],
+        "model_hash": plan.arm_c.model_hash,
+        "dtype": plan.arm_c.dtype,
+        "chain_model_hash": chain_hash,
+        "translators_trained_on": trained_on(plan.translators, chain_hash, plan.arm_c.model_hash),
+    }

@@ -17,13 +17,9 @@ a GPU each batch costs about its longest program's time (every rod call is annou
 60 s table is a GPU job; on a 2-core CPU it simulates 25-37 s per second: use --duration and
 --no-robustness there (`eval.rod`).
 
-`--target-domain-file JSON` scores in a medium given by a Domain file (an identify.json of
-`python -m mjx_arm.identify`, or ``{"domain": {...}}``) instead of --target-domain: the chain in
-that Domain scores the table, and shapes.md names the file, its sha256 and its fields; only
-translators labelled "identified" and taught on the same Domain fields are scored
-(`eval.methods.load_translator`), and the conditioned translator over a range of media
-(`--methods ... ccgan_range --range-path CKPT`), which translates into any medium of its range at
-its rule's k, with either --target-domain or --target-domain-file.
+`--target-domain-file JSON` scores in the medium of a Domain file instead of --target-domain
+(`eval.target`); `--methods ... ccgan_range --range-path CKPT` scores the conditioned translator
+over a range of media in this run's medium, at its rule's k.
 
 The pressure programs themselves are pure functions of time and live below every layer that
 draws them, in `mjx_arm.programs` (the circle, rectangle, damped circle, ellipse and kite, each
@@ -320,12 +316,11 @@ def _add_arm_options(p: argparse.ArgumentParser) -> None:
         metavar="JSON",
         default=None,
         help="D_c instead of --target-domain: the chain in the Domain of this file (an"
-        ' identify.json of mjx_arm.identify, or {"domain": {...}}), which scores the table,'
-        " picks stretch only's k and runs every method; shapes.md records its path, sha256 and"
-        " fields. Translators must be labelled 'identified' and taught on the same Domain fields"
-        " (ccgan.adapt's), or be the conditioned ccgan_range with the medium in its range; the"
-        " committed ones are refused: leave them out with --methods. Not"
-        " with --simulator rod (default: --target-domain)",
+        ' identify.json or {"domain": {...}}), which scores the table, picks stretch only\'s k'
+        " and runs every method; shapes.md records it. Translators must be labelled"
+        " 'identified' and taught on the same fields (ccgan.adapt's), or be ccgan_range; leave"
+        " the committed ones out with --methods. Not with --simulator rod (default:"
+        " --target-domain)",
     )
     p.add_argument(
         "--taught-medium-rtol",

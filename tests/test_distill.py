@@ -402,6 +402,23 @@ def test_teacher_data_adds_the_babbling_family(arms, tmp_path):
         dataclasses.replace(config, batch_size=3)
 
 
+def _resumes_to_the_whole_run(shipped, arms, config, cache, state, whole, whole_history):
+    """Resumed from `state` after epoch 2 of 4, a run trains epochs 3-4 only, removes the state
+    and ends where the unstopped run (`whole`, `whole_history`) ends, bit for bit."""
+    arm_s, arm_c = arms
+    logs = []
+    resumed, history = distill.distill(
+        [shipped], arm_s, arm_c, config, cache=cache, progress=False, log=logs.append,
+        resume=state,
+    )  # fmt: skip
+    assert any("2 of 4 epochs done" in line for line in logs)
+    assert history["complete"] and not state.exists()
+    assert history["train_loss"] == whole_history["train_loss"]
+    assert history["best_epoch"] == whole_history["best_epoch"]
+    for got, want in zip(jax.tree.leaves(resumed[0]), jax.tree.leaves(whole[0]), strict=True):
+        np.testing.assert_array_equal(got, want)
+
+
 def test_a_stopped_distillation_goes_on_from_its_next_epoch(arms, tmp_path):
     """Stopped after epoch 2 of 4 (SIGTERM's event, set at epoch 1's validation: training stops
     after the next epoch), a run keeps its training state; the same call then trains epochs 3-4
@@ -427,17 +444,7 @@ def test_a_stopped_distillation_goes_on_from_its_next_epoch(arms, tmp_path):
         on_validation=stop_after_first_report, stop=stop, resume=state,
     )  # fmt: skip
     assert not stopped["complete"] and len(stopped["train_loss"]) == 2 and state.exists()
-    logs = []
-    resumed, history = distill.distill(
-        [shipped], arm_s, arm_c, every, cache=cache, progress=False, log=logs.append,
-        resume=state,
-    )  # fmt: skip
-    assert any("2 of 4 epochs done" in line for line in logs)
-    assert history["complete"] and not state.exists()
-    assert history["train_loss"] == whole_history["train_loss"]
-    assert history["best_epoch"] == whole_history["best_epoch"]
-    for got, want in zip(jax.tree.leaves(resumed[0]), jax.tree.leaves(whole[0]), strict=True):
-        np.testing.assert_array_equal(got, want)
+    _resumes_to_the_whole_run(shipped, arms, every, cache, state, whole, whole_history)
     # Saved for 6 epochs, read by a run of 4: trained afresh, from epoch 1.
     stop.clear()
     six = dataclasses.replace(every, epochs=6)
@@ -445,7 +452,7 @@ def test_a_stopped_distillation_goes_on_from_its_next_epoch(arms, tmp_path):
         [shipped], arm_s, arm_c, six, cache=cache, progress=False, log=lambda _: None,
         on_validation=stop_after_first_report, stop=stop, resume=state,
     )  # fmt: skip
-    logs.clear()
+    logs = []
     _, afresh = distill.distill(
         [shipped], arm_s, arm_c, every, cache=cache, progress=False, log=logs.append,
         resume=state,
@@ -481,16 +488,7 @@ def test_a_killed_distillation_goes_on_from_its_last_validation(arms, tmp_path):
             on_validation=killed_at_second_report, resume=state,
         )  # fmt: skip
     assert reports == [1, 2] and state.exists()
-    logs = []
-    resumed, history = distill.distill(
-        [shipped], arm_s, arm_c, every, cache=cache, progress=False, log=logs.append,
-        resume=state,
-    )  # fmt: skip
-    assert any("2 of 4 epochs done" in line for line in logs)
-    assert history["complete"] and not state.exists()
-    assert history["train_loss"] == whole_history["train_loss"]
-    for got, want in zip(jax.tree.leaves(resumed[0]), jax.tree.leaves(whole[0]), strict=True):
-        np.testing.assert_array_equal(got, want)
+    _resumes_to_the_whole_run(shipped, arms, every, cache, state, whole, whole_history)
 
 
 def test_teacher_cache_key_records_the_domain_programs_and_planner(arms, small_xml):
