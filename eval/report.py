@@ -39,7 +39,7 @@ def target_name(results: dict) -> str:
 
 
 def target_file_line(results: dict) -> str | None:
-    """The header's line on the Domain file D_c was read from (`eval.pipeline.
+    """The header's line on the Domain file D_c was read from (`eval.target.
     target_file_record`): its path, sha256, the identification method where it has one, the
     Domain fields it sets and the D_c arm's physical values; None without one."""
     record = results.get("target_domain_file")
