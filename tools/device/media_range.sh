@@ -73,8 +73,10 @@ references)
   # alone, with the range's teacher settings (PAPER_SETTINGS: 2 physics steps per planning
   # period, programs of 60 s) and the per-pair stage's program count, at the rule's k. Both at
   # once beside whatever else runs; SIGTERM at REF_LIMIT_S, rerun to go on (teacher by shard).
+  # REF_MEDIA picks some of them ("r s k" triples, ";" between), e.g. REF_MEDIA="4 0.8 10".
   pids=() status=0 t0=$SECONDS
-  for medium in "4 0.8 10" "20 0.65 50"; do
+  IFS=';' read -r -a ref_media <<<"${REF_MEDIA:-4 0.8 10;20 0.65 50}"
+  for medium in "${ref_media[@]}"; do
     read -r r s k <<<"$medium"
     dir=$RUN/ref_r${r}_s${s}
     mkdir -p "$dir"
