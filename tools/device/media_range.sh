@@ -56,11 +56,17 @@ teacher)
   ;;
 distill)
   t0=$SECONDS
+  # A machine lost after the teacher call: the parts come back carried as one xz tar
+  # (runs/media_range_carry/teacher_parts.tar.xz, 10.4 MB, beside the tree without the wheels).
+  carried=runs/media_range_carry/teacher_parts.tar.xz
+  if [[ ! -f $RUN/part0/teacher.npz && -f $carried ]]; then
+    xz -dc "$carried" | tar -x && echo "teacher parts from $carried"
+  fi
   # SIGTERM at 420 s: the process then validates once more (60-70 s for 24 media on the
   # H200's host) and saves; KILL 120 s later. The training state is also saved at every
   # validation, so a kill loses at most eval_every epochs.
   timeout -k 120 -s TERM "${DISTILL_LIMIT_S:-420}" $PY -m ccgan.distill_range --out "$RUN/range" \
-    --teacher-from "$RUN"/part{0,1,2,3} >"$RUN/range.log" 2>&1
+    --teacher-from "$RUN"/part{0,1,2,3} ${DISTILL_ARGS:-} >"$RUN/range.log" 2>&1
   status=$?
   tail -n 4 "$RUN/range.log"
   echo "distill: rc $status, wall $((SECONDS - t0)) s (143: stopped, rerun to go on)"
