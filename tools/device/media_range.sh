@@ -65,6 +65,7 @@ distill)
   # SIGTERM at 420 s: the process then validates once more (60-70 s for 24 media on the
   # H200's host) and saves; KILL 120 s later. The training state is also saved at every
   # validation, so a kill loses at most eval_every epochs.
+  # shellcheck disable=SC2086 # DISTILL_ARGS, word-split on purpose
   timeout -k 120 -s TERM "${DISTILL_LIMIT_S:-420}" $PY -m ccgan.distill_range --out "$RUN/range" \
     --teacher-from "$RUN"/part{0,1,2,3} ${DISTILL_ARGS:-} >"$RUN/range.log" 2>&1
   status=$?
