@@ -71,7 +71,8 @@ distill)
   status=$?
   tail -n 4 "$RUN/range.log"
   echo "distill: rc $status, wall $((SECONDS - t0)) s (143: stopped, rerun to go on)"
-  tar -cf "$OUT/distill.tar" --exclude='*.npz' "$RUN/range" "$RUN/range.log"
+  # the training state (1.4 MB) comes back, the teacher (10 MB) stays: a lost machine resumes
+  tar -cf "$OUT/distill.tar" --exclude=teacher.npz "$RUN/range" "$RUN/range.log"
   exit $status
   ;;
 references)
@@ -107,7 +108,7 @@ json.dump({'domain': {'viscosity_scale': media.viscosity_scale_of(r, c), 'stiffn
     echo "== ${dir%/}" && tr '\r' '\n' <"${dir%/}.log" | grep -a "teacher\|wrote\|held-out\|resum" | tail -5
   done
   echo "references: wall $((SECONDS - t0)) s (rc 1 where one stopped: rerun to go on)"
-  tar -cf "$OUT/references.tar" --exclude='*.npz' "$RUN"/ref_r* 
+  tar -cf "$OUT/references.tar" --exclude='teacher*.npz' "$RUN"/ref_r*
   exit $status
   ;;
 score)
