@@ -125,21 +125,31 @@ offpair) # (c): a translator for each medium off the pair, taught on the arm ide
   # training by its state). Scored afterwards in the true medium on any CPU: eval.shapes
   # --target-domain-file TRUTH.json --taught-medium-rtol 0.05 --methods none stretch ccgan_ident
   # --identified-path .../distill/translator.ckpt (docs/identification.md; not yet run).
-  pids=() status=0
+  # OFFPAIR_TEACH=truth: the privileged references instead, taught in the true media (the
+  # case.json's truth_domain as a plain {"domain": ...} file) into offpair_truth/.
+  pids=() status=0 ident=studies/results/h200/aged_identified/identify_50
   for c in half_drag double_drag; do
-    mkdir -p "$RUN/offpair/$c"
+    if [[ ${OFFPAIR_TEACH:-identified} == truth ]]; then
+      dir=$RUN/offpair_truth teach=$dir/$c/truth.json
+      mkdir -p "$dir/$c"
+      $PY -c "import json,sys; c=json.load(open(sys.argv[1])); d=c['truth_domain']; d.pop('name');
+json.dump({'domain': d}, open(sys.argv[2], 'w'))" "$ident/$c/case.json" "$teach"
+    else
+      dir=$RUN/offpair teach=$ident/$c/identify.json
+    fi
+    mkdir -p "$dir/$c"
     timeout -k 120 -s TERM "${OFFPAIR_LIMIT_S:-450}" $PY -m ccgan.distill \
       --model models/softarm.xml --domain identified --start-domain constrained \
-      --teach-domain studies/results/h200/aged_identified/identify_50/$c/identify.json \
+      --teach-domain "$teach" \
       --k-candidates 5 10 15 20 25 30 40 "${PROGRAMS[@]}" --teacher-substeps 2 "${TRAIN[@]}" \
-      "${SEEDS[@]}" --out "$RUN/offpair/$c/distill" >"$RUN/offpair/$c.log" 2>&1 &
+      "${SEEDS[@]}" --out "$dir/$c/distill" >"$dir/$c.log" 2>&1 &
     pids+=($!)
   done
   for pid in "${pids[@]}"; do wait "$pid" || status=1; done
   for c in half_drag double_drag; do
-    echo "== $c" && tr '\r' '\n' <"$RUN/offpair/$c.log" | grep -a "k =\|wrote\|resum\|stopp" | tail -4
+    echo "== $c" && tr '\r' '\n' <"$dir/$c.log" | grep -a "k =\|wrote\|resum\|stopp" | tail -4
   done
-  pack offpair "$RUN/offpair"
+  pack "$(basename "$dir")" "$dir"
   exit $status
   ;;
 aged_shapes) # scored once, after the schedule is fixed
