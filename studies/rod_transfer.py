@@ -135,6 +135,12 @@ def main(argv=None) -> None:
     p = cli_parser("studies.rod_transfer", __doc__)
     p.add_argument("--translators", nargs="+", default=[], metavar="NAME=PATH[,PATH...]")
     p.add_argument("--target-domain", default="constrained")
+    p.add_argument(
+        "--target-domain-file",
+        metavar="JSON",
+        help="with --simulator chain: the chain in the Domain of this file (an identify.json or"
+        ' {"domain": {...}}) instead of --target-domain, e.g. a medium off the pair (issue 50 (c))',
+    )
     p.add_argument("--stretch-k", type=int, default=20)
     p.add_argument("--n-shape-like", type=int, default=8, help="per held-out split (2 splits)")
     p.add_argument("--n-other", type=int, default=4, help="per unseen family")
@@ -156,6 +162,14 @@ def main(argv=None) -> None:
         p.error("--n-shape-like and --n-other are both 0: no program to score")
     if a.diagnose and a.simulator == "chain":
         p.error("--diagnose compares the chain with the rod: not with --simulator chain")
+    target = a.target_domain
+    if a.target_domain_file:
+        if a.simulator != "chain":
+            p.error("--target-domain-file is for --simulator chain (the rod has its own media)")
+        try:
+            target = mjx_arm.domains.read_domain_file(a.target_domain_file).domain
+        except (OSError, ValueError) as err:
+            p.error(f"--target-domain-file: {err}")
     specs = parse_translators(p, a.translators)
     translators = {name: [load_translator(path) for path in paths] for name, paths in specs.items()}
     t0 = time.perf_counter()
@@ -163,7 +177,7 @@ def main(argv=None) -> None:
     if a.simulator == "rod":
         rod_s, rod_c = mjx_arm.load_rod("source"), mjx_arm.load_rod(a.target_domain)
     else:
-        rod_s, rod_c = (chain_in_c(mjx_arm.load(a.model, d)) for d in ("source", a.target_domain))
+        rod_s, rod_c = (chain_in_c(mjx_arm.load(a.model, d)) for d in ("source", target))
     where = "the rod" if a.simulator == "rod" else f"the chain of {a.model} (MuJoCo C)"
     x_rod = rod_s.rollout(programs)
     print(f"{len(programs)} programs' D_s paths in {where} ({time.perf_counter() - t0:.0f} s)")
@@ -198,7 +212,8 @@ def main(argv=None) -> None:
     lines = [
         "",
         f"X_err (cm, mean over each program and then the family's programs; translators: mean"
-        f" of their seeds) in {where} in {a.target_domain} against its own D_s path;"
+        f" of their seeds) in {where} in {a.target_domain_file or a.target_domain} against its"
+        " own D_s path;"
         f" {a.duration_s:g} s programs; k: "
         + ", ".join(f"{name} {k}" for name, k in ks.items())
         + f". Families {', '.join(UNSEEN_FAMILIES)} are in no chain distillation's training.",
@@ -221,7 +236,7 @@ def main(argv=None) -> None:
     result = {
         "translators": specs,
         "k": ks,
-        "target_domain": a.target_domain,
+        "target_domain": a.target_domain_file or a.target_domain,
         "simulator": a.simulator,
         "families": families,
         "per_program_x_err_cm": {c: e.tolist() for c, e in errors.items()},

@@ -45,3 +45,39 @@ def test_the_chain_scores_the_families_in_its_own_medium(tmp_path):
     want = position_error_cm(poses, targets).mean(-1)
     np.testing.assert_allclose(result["per_program_x_err_cm"]["stretch"], want, rtol=1e-9)
     assert result["simulator"] == "chain" and result["k"]["aged_sim"] == 25
+
+
+def test_a_domain_file_sets_the_chains_medium(tmp_path):
+    """`--target-domain-file` (a medium off the pair, issue 50 (c)): stretch only's X_err is that
+    medium's chain in MuJoCo C; the same file with --simulator rod is refused before any work."""
+    import json
+
+    import mjx_arm
+    from tracking.held import run_dc, stretch
+    from tracking.metrics import position_error_cm
+
+    medium = tmp_path / "half_drag.json"
+    medium.write_text(json.dumps({"domain": {"viscosity_scale": 10.05845}}))
+    rod_transfer.main([
+        "--target-domain-file", str(medium), "--simulator", "chain", "--stretch-k", "5",
+        "--n-shape-like", "0", "--n-other", "1", "--duration-s", "2", "--out", str(tmp_path / "t"),
+    ])  # fmt: skip
+    result = json.loads((tmp_path / "t.json").read_text())
+    programs, _ = rod_transfer.programs_by_family(0, 1, 2.0)
+    targets = mjx_arm.load(domain="source").rollout(programs, backend="c")
+    arm = mjx_arm.load(domain=mjx_arm.Domain(name="half", viscosity_scale=10.05845))
+    want = position_error_cm(run_dc(arm, stretch(programs, 5), 5, "c"), targets).mean(-1)
+    np.testing.assert_allclose(result["per_program_x_err_cm"]["stretch"], want, rtol=1e-9)
+    assert result["target_domain"] == str(medium)
+    in_dc = position_error_cm(
+        run_dc(mjx_arm.load(domain="constrained"), stretch(programs, 5), 5, "c"), targets
+    ).mean(-1)
+    assert not np.allclose(want, in_dc)  # the file's medium, not D_c's
+
+
+def test_a_domain_file_is_refused_for_the_rod(tmp_path, capsys):
+    medium = tmp_path / "m.json"
+    medium.write_text('{"domain": {"viscosity_scale": 10.0}}')
+    with pytest.raises(SystemExit):
+        rod_transfer.main(["--target-domain-file", str(medium), "--out", str(tmp_path / "t")])
+    assert "--simulator chain" in capsys.readouterr().err
