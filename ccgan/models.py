@@ -480,6 +480,45 @@ def with_condition_inputs(generator: Generator, g_params, n_condition: int):
     return wide, jax.tree.map(widen, template, g_params)
 
 
+def with_hidden(generator: Generator, g_params, hidden: int, seed: int = 0):
+    """A wider G started from a trained one, computing what it computed: (the generator with
+    `hidden` units in each LSTM layer, its parameters).
+
+    Every kernel [in, out] keeps its trained block; the rows of the new units (their outputs
+    into the next gates and into fc) are zero, and the columns of the new units (their gates'
+    inputs) and their biases are the wider G's own initialisation (`seed`). The old units then
+    never read a new one, so the output is the trained G's (to float rounding: sums with zero
+    terms), while the new units run and their zero rows get gradients from the first step. For
+    a conditioned G over many media (issue 51), whose 32 units fit 24 media's teacher 4-8x
+    worse than one medium's (`studies/results/cpu/range_fit/`).
+
+    Args:
+      generator: the trained G.
+      g_params: its variables ({"params": ...}).
+      hidden: units per LSTM layer, at least the trained G's.
+      seed: the new units' initialisation.
+
+    Raises:
+      ValueError: `hidden` is below the trained G's.
+    """
+    if hidden < generator.hidden:
+        raise ValueError(f"hidden {hidden} is below the trained G's {generator.hidden}")
+    if hidden == generator.hidden:
+        return generator, g_params
+    wide = generator.clone(hidden=hidden)
+    sample = jnp.zeros((1, 1, PRESSURE_DIM + POSE_DIM + generator.n_condition))
+    fresh = wide.init(jax.random.PRNGKey(seed), sample)
+
+    def widen(new, have):
+        have = jnp.asarray(have)
+        if have.ndim == 1:
+            return new.at[: have.shape[0]].set(have)
+        rows, cols = have.shape
+        return new.at[rows:, :cols].set(0.0).at[:rows, :cols].set(have)
+
+    return wide, jax.tree.map(widen, fresh, g_params)
+
+
 class TimeConv(nn.Module):
     """Conv1D over time, "SAME" padding, written as one matrix product of shifted copies.
 

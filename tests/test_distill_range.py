@@ -26,7 +26,7 @@ from ccgan.media_range import (
     StepTimeModel,
     k_from_step_time,
 )
-from ccgan.models import with_condition_inputs
+from ccgan.models import with_condition_inputs, with_hidden
 from ccgan.translator import TRANSLATORS_DIR, TranslatorMismatchError
 from eval import media_range as scoring
 from mjx_arm import constants, domains, media
@@ -118,6 +118,30 @@ def test_a_widened_generator_starts_as_its_start_and_the_condition_changes_its_o
         wide.generator.apply(params, x)
     with pytest.raises(ValueError, match="unconditioned G"):
         with_condition_inputs(wide.generator, params, 2)
+
+
+def test_a_wider_generator_computes_its_starts_output_and_its_new_units_learn(conditioned):
+    """`with_hidden`: 32 -> 48 units per layer gives the conditioned start's output; the new
+    units' rows into fc and the next gates are zero and get gradients; narrower is refused."""
+    _, wide = conditioned
+    x = jnp.asarray(np.random.default_rng(1).uniform(size=(2, 12, 11)), jnp.float32)
+    params = first_layer_condition_rows(wide.g_c_params, 0.3)  # a condition that acts
+    wider, wider_params = with_hidden(wide.generator, params, 48)
+    assert wider.hidden == 48 and wider.n_condition == wide.generator.n_condition
+    want = wide.generator.apply(params, x)
+    np.testing.assert_allclose(wider.apply(wider_params, x), want, atol=1e-6)
+    fc_rows = wider_params["params"]["fc"]["kernel"][32:]
+    assert float(jnp.abs(fc_rows).max()) == 0.0
+
+    def loss(p):
+        return jnp.mean((wider.apply(p, x) - 0.5) ** 2)
+
+    grad = jax.grad(loss)(wider_params)["params"]["fc"]["kernel"][32:]
+    assert float(jnp.abs(grad).max()) > 0.0  # the new units run: their rows move at once
+    with pytest.raises(ValueError, match="below the trained G's 32"):
+        with_hidden(wide.generator, params, 16)
+    same, same_params = with_hidden(wide.generator, params, 32)
+    assert same is wide.generator and same_params is params
 
 
 def test_the_rule_gives_each_study_medium_its_best_stretch_k_from_the_others():
@@ -242,6 +266,7 @@ def test_the_cli_refuses_bad_settings_before_any_work(tmp_path, capsys):
         (["--quick", "--held-out", "9", "1"], "--held-out medium (9, 1) is outside the range"),
         (["--quick", "--translators", str(tmp_path / "none.ckpt")], "no checkpoint at"),
         (["--quick", "--seeds", "0", "1"], "one seed per translator file"),
+        (["--quick", "--generator-hidden", "16"], "at least the start's 32"),
     ):
         with pytest.raises(SystemExit) as exc:
             distill_range.main([*argv, "--out", str(tmp_path / "o")])

@@ -15,7 +15,7 @@ from ccgan.cli import add_config_flags, cli_parser, config_from_args, lock_outpu
 from ccgan.distill.config import DistillConfig
 from ccgan.distill_range.config import RangeConfig
 from ccgan.media_range import MEDIA_RANGE, N_CONDITION, MediaRange
-from ccgan.models import with_condition_inputs
+from ccgan.models import with_condition_inputs, with_hidden
 from ccgan.translator import (
     TRANSLATORS_DIR,
     TRUST_FLAG,
@@ -101,6 +101,14 @@ def build_parser(doc: str = __doc__) -> argparse.ArgumentParser:
         help="folders of parts (runs with --teacher-ks and the same settings) whose teacher.npz"
         " shards join --out's before anything is planned; one planned otherwise is skipped",
     )
+    p.add_argument(
+        "--generator-hidden",
+        type=int,
+        metavar="H",
+        help="LSTM units per layer of the conditioned G_c (default: the start's, 32): a wider G"
+        " starts computing the start's translation (`ccgan.models.with_hidden`), its new units"
+        " free to fit the media the start's cannot",
+    )
     add_config_flags(p, RangeConfig)
     add_config_flags(p, DistillConfig, skip=FIXED + FROM_RANGE)
     return p
@@ -154,6 +162,13 @@ def start_translators(
         generator, params = with_condition_inputs(
             translator.generator, translator.g_c_params, N_CONDITION
         )
+        if a.generator_hidden is not None:
+            if a.generator_hidden < generator.hidden:
+                p.error(
+                    f"--generator-hidden {a.generator_hidden}: at least the start's"
+                    f" {generator.hidden} ({path})"
+                )
+            generator, params = with_hidden(generator, params, a.generator_hidden, len(sources))
         translators.append(
             dataclasses.replace(translator, generator=generator, g_c_params=params, f_c_params=None)
         )
