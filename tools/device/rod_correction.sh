@@ -23,6 +23,8 @@
 #   bash tools/device/rod_correction.sh rod_score      # rod_transfer, ~230 s
 #   bash tools/device/rod_correction.sh rod_shapes     # the five shapes in the rod, once, ~250 s
 #   bash tools/device/rod_correction.sh offpair        # (c): half and twice D_c's drag, at once
+#     (OFFPAIR_TEACH=truth: their privileged references; both ran 2026-12-04, one H200, 387-432 s:
+#     studies/results/h200/offpair/)
 #   STEP=2 bash tools/device/rod_correction.sh rod_teacher, rod_distill, rod_score: a second
 #     step, corrected from the committed corrected translator into runs/rod_correction/rod2
 #     (rod_score then scores the three side by side; not yet run)
@@ -124,7 +126,7 @@ offpair) # (c): a translator for each medium off the pair, taught on the arm ide
   # there, the two at once; SIGTERM at OFFPAIR_LIMIT_S, rerun to go on (teacher by shard, the
   # training by its state). Scored afterwards in the true medium on any CPU: eval.shapes
   # --target-domain-file TRUTH.json --taught-medium-rtol 0.05 --methods none stretch ccgan_ident
-  # --identified-path .../distill/translator.ckpt (docs/identification.md; not yet run).
+  # --identified-path .../distill/translator.ckpt (docs/identification.md, "Media off the pair").
   # OFFPAIR_TEACH=truth: the privileged references instead, taught in the true media (the
   # case.json's truth_domain as a plain {"domain": ...} file) into offpair_truth/.
   pids=() status=0 ident=studies/results/h200/aged_identified/identify_50
