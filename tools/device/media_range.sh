@@ -9,9 +9,12 @@
 #   bash tools/device/media_range.sh references # per-medium translators at (4, 0.8), (20, 0.65)
 #   bash tools/device/media_range.sh score     # eval.media_range on held-out programs
 #
-# A plan for one session's 30 minutes (not yet run as a whole): call 1 the teacher (carry the
-# wheels); call 2 `bash tools/device/media_range.sh distill & bash tools/device/media_range.sh
-# references; wait`; call 3 the same again (both resume), then score.
+# A plan for one session's 30 minutes (not yet run as a whole): calls 1-2 the wheels' two pieces
+# (tools/device/cut_wheels.sh), the second with the teacher; call 3 G_c's two widths side by
+# side, `bash tools/device/media_range.sh distill & RANGE_NAME=range_h96
+# DISTILL_ARGS="--generator-hidden 96" bash tools/device/media_range.sh distill; wait`
+# (studies/results/cpu/range_fit/: the 32-unit G_c under-fits); call 4 the same again (both
+# resume). Score both on held-out media afterwards (the score phase, RANGE_NAME=...).
 #
 # The default sample's 24 training media take k in {5, 10, 15, 20, 25, 30, 40, 50, 60}
 # (measured in MuJoCo C on the 2-core AMD EPYC, 2026-12-02); the MJX tracker is bound by its
@@ -66,13 +69,16 @@ distill)
   # H200's host) and saves; KILL 120 s later. The training state is also saved at every
   # validation, so a kill loses at most eval_every epochs.
   # shellcheck disable=SC2086 # DISTILL_ARGS, word-split on purpose
-  timeout -k 120 -s TERM "${DISTILL_LIMIT_S:-420}" $PY -m ccgan.distill_range --out "$RUN/range" \
-    --teacher-from "$RUN"/part{0,1,2,3} ${DISTILL_ARGS:-} >"$RUN/range.log" 2>&1
+  # RANGE_NAME (default range) names the run's folder, so that two trainings (e.g. G_c's width:
+  # RANGE_NAME=range_h96 DISTILL_ARGS="--generator-hidden 96") run side by side on one GPU.
+  name=${RANGE_NAME:-range}
+  timeout -k 120 -s TERM "${DISTILL_LIMIT_S:-420}" $PY -m ccgan.distill_range --out "$RUN/$name" \
+    --teacher-from "$RUN"/part{0,1,2,3} ${DISTILL_ARGS:-} >"$RUN/$name.log" 2>&1
   status=$?
-  tail -n 4 "$RUN/range.log"
-  echo "distill: rc $status, wall $((SECONDS - t0)) s (143: stopped, rerun to go on)"
+  tail -n 4 "$RUN/$name.log"
+  echo "distill $name: rc $status, wall $((SECONDS - t0)) s (143: stopped, rerun to go on)"
   # the training state (1.4 MB) comes back, the teacher (10 MB) stays: a lost machine resumes
-  tar -cf "$OUT/distill.tar" --exclude=teacher.npz "$RUN/range" "$RUN/range.log"
+  tar -cf "$OUT/distill_$name.tar" --exclude=teacher.npz "$RUN/$name" "$RUN/$name.log"
   exit $status
   ;;
 references)
@@ -113,8 +119,9 @@ json.dump({'domain': {'viscosity_scale': media.viscosity_scale_of(r, c), 'stiffn
   ;;
 score)
   mkdir -p "$RUN/score"
-  $PY -m eval.media_range --translators "$RUN"/range/translator_seed{0,1,2}.ckpt \
-    --out "$RUN/score/media_range" \
+  name=${RANGE_NAME:-range}
+  $PY -m eval.media_range --translators "$RUN/$name"/translator_seed{0,1,2}.ckpt \
+    --out "$RUN/score/$name" \
     --reference 10 1 results/paper/rerun_2026-11-27/run/ccgan_sim/translator.ckpt \
     --reference 10 0.7 results/paper/rerun_2026-11-27/run/aged_sim/translator.ckpt \
     --reference 4 0.8 "$RUN"/ref_r4_s0.8/translator.ckpt \
