@@ -17,6 +17,7 @@
 #   bash tools/device/rod_correction.sh aged_teacher   # ~245 s
 #   bash tools/device/rod_correction.sh aged_distill   # ~215 s
 #   bash tools/device/rod_correction.sh aged_shapes    # ~90 s
+#   bash tools/device/rod_correction.sh aged_ccgan     # CCGAN-GP on the aged arm's data (not yet run)
 #   bash tools/device/rod_correction.sh rod_teacher    # the rod's rollouts (kept, ~550 s) then
 #                                                      # the teacher: two calls
 #   bash tools/device/rod_correction.sh rod_distill    # ~340 s
@@ -154,6 +155,41 @@ json.dump({'domain': d}, open(sys.argv[2], 'w'))" "$ident/$c/case.json" "$teach"
   pack "$(basename "$dir")" "$dir"
   exit $status
   ;;
+aged_ccgan) # (b)'s CCGAN-GP on the aged arm's own data: the 50 + 3 programs of 60 s that the
+  # identification read (seed 0, the paper's stream "babble/aged/..."), D_s's beside them, and
+  # the long babbling for F_c, trained with the chain's ccgan settings, k chosen in the aged arm
+  # among 20, 25, 30 (stretch only's best there is 25). AGED_CCGAN_QUICK=1: tiny sizes, to try
+  # the path on a CPU (2 min on the 2-core EPYC with DEVICE_TMP, PY and OUT set as in chain.sh's
+  # rehearsal; eval.shapes --quick then read its translator). Scored afterwards on any CPU: eval.shapes --target-domain aged
+  # --methods ccgan --ccgan-path $RUN/aged_ccgan/train/translator.ckpt.
+  dir=$RUN/aged_ccgan
+  mkdir -p "$dir"
+  if [[ ${AGED_CCGAN_QUICK:-0} == 1 ]]; then
+    data=(--n 2 --n-val 1 --duration 4) long=(--n 2 --n-val 1 --duration 8)
+    train=(--epochs 2 --stretch-every 1 --hold-factors 2 3 --k-choice-n-programs 1 --n-val 1
+      --batch-size 4 --k-choice-seconds 4 --forward-epochs 1 --forward-window 10)
+  else
+    data=(--preset paper) long=(--n 400 --n-val 1 --duration 120)
+    train=(--epochs 60 --stretch-every 20 --hold-factors 20 25 30 --k-choice-n-programs 6
+      --k-choice-seconds 30 --forward-epochs 80 --forward-window 150)
+  fi
+  timed "aged babbling" "$dir/data.log" $PY -m mjx_arm.babble "${data[@]}" --domain source,aged \
+    --seed 0 --backend c --model models/softarm.xml --out "$dir/data/babble" || exit 1
+  timed "aged long babbling" "$dir/long.log" $PY -m mjx_arm.babble "${long[@]}" --domain aged \
+    --seed 12 --hold-min 1 --hold-max 40 --backend c --model models/softarm.xml \
+    --out "$dir/long/babble" || exit 1
+  b=$dir/data/babble
+  timed "aged CCGAN-GP" "$dir/train.log" $PY -m ccgan.train \
+    --source "$b/source_train.npz" "$b/source_val.npz" --constrained "$b/aged_train.npz" \
+    "$b/aged_val.npz" --model models/softarm.xml --workdir "$dir/train" --seeds 0 1 2 \
+    --lambda-cycle 8.663 --lambda-identity 0.5628 --lambda-feedback 47.35 \
+    --lr-generator 8.459e-4 --lr-critic 5.846e-5 --patience 1 --k-choice-programs shape_like \
+    --k-choice-substeps 5 --forward-data "$dir/long/babble/aged_train.npz" --forward-open-loop \
+    --forward-batch-size 64 "${train[@]}"
+  status=$?
+  tar -cf "$OUT/aged_ccgan.tar" --exclude='*.npz' --exclude='state.ckpt' "$dir"
+  exit $status
+  ;;
 aged_shapes) # scored once, after the schedule is fixed
   timed "aged shapes" "$RUN/aged/shapes.out.log" $PY -m eval.shapes --model models/softarm.xml \
     --target-domain aged --methods none stretch ccgan_sim ccgan_ident --no-robustness \
@@ -202,7 +238,7 @@ rod_shapes) # scored once, after rod_score's held-out win (studies/results/h200/
   ;;
 *)
   echo "unknown phase $phase: identify, aged_teacher, aged_distill, aged_shapes, rod_teacher," \
-    "rod_distill, rod_score or rod_shapes"
+    "rod_distill, rod_score, rod_shapes, offpair or aged_ccgan"
   exit 2
   ;;
 esac
