@@ -17,7 +17,7 @@
 #   bash tools/device/rod_correction.sh aged_teacher   # ~245 s
 #   bash tools/device/rod_correction.sh aged_distill   # ~215 s
 #   bash tools/device/rod_correction.sh aged_shapes    # ~90 s
-#   bash tools/device/rod_correction.sh aged_ccgan     # CCGAN-GP on the aged arm's data (not yet run)
+#   bash tools/device/rod_correction.sh aged_ccgan     # CCGAN-GP on the aged arm's data (not run)
 #   bash tools/device/rod_correction.sh rod_teacher    # the rod's rollouts (kept, ~550 s) then
 #                                                      # the teacher: two calls
 #   bash tools/device/rod_correction.sh rod_distill    # ~340 s
@@ -160,7 +160,8 @@ aged_ccgan) # (b)'s CCGAN-GP on the aged arm's own data: the 50 + 3 programs of 
   # the long babbling for F_c, trained with the chain's ccgan settings, k chosen in the aged arm
   # among 20, 25, 30 (stretch only's best there is 25). AGED_CCGAN_QUICK=1: tiny sizes, to try
   # the path on a CPU (2 min on the 2-core EPYC with DEVICE_TMP, PY and OUT set as in chain.sh's
-  # rehearsal; eval.shapes --quick then read its translator). Scored afterwards on any CPU: eval.shapes --target-domain aged
+  # rehearsal; eval.shapes --quick then read its translator). Scored afterwards on any CPU:
+  # eval.shapes --target-domain aged
   # --methods ccgan --ccgan-path $RUN/aged_ccgan/train/translator.ckpt.
   dir=$RUN/aged_ccgan
   mkdir -p "$dir"
