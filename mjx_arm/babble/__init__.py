@@ -120,8 +120,10 @@ class BabbleConfig:
     """Shortest hold of one target (s)."""
     hold_max_s: float = 3.0
     """Longest hold of one target (s)."""
-    domains: tuple[str, ...] = ("source", "constrained")
-    """Domains to simulate (`mjx_arm.DOMAINS` names)."""
+    domains: tuple[str | domains.Domain, ...] = ("source", "constrained")
+    """Domains to simulate: `mjx_arm.DOMAINS` names, or `Domain`s of other names (a medium off
+    the paper's pair, e.g. from `--domain-file`), each babbled in its own programs' stream
+    named by its name."""
     backend: str = "auto"
     """"mjx", "c" (MuJoCo C on all CPU cores), "auto" (c when JAX runs on the CPU) or "rod"
     (the reference Cosserat rod, float64, instead of the chain: `mjx_arm.babble.rod`)."""
@@ -141,10 +143,18 @@ class BabbleConfig:
             raise ValueError(f"seed must be >= 0 (NumPy seeds), got {self.seed}")
         if min(self.n_train, self.n_val) < 0 or self.n_train + self.n_val == 0:
             raise ValueError("n_train and n_val must be >= 0, not both 0")
-        if not self.domains or len(set(self.domains)) != len(self.domains):
-            raise ValueError(f"need one or more distinct domains, got {list(self.domains)}")
-        for name in self.domains:
-            domains.resolve(name)  # an unknown name raises, listing the built-in ones
+        names = [domains.resolve(d).name for d in self.domains]  # unknown names raise
+        if not names or len(set(names)) != len(names):
+            raise ValueError(f"need one or more distinct domains, got {names}")
+        for d in self.domains:
+            if isinstance(d, domains.Domain) and d.name in domains.DOMAINS:
+                if d != domains.DOMAINS[d.name]:
+                    raise ValueError(
+                        f"a Domain named {d.name!r} with other fields than the built-in one:"
+                        " give the other medium its own name"
+                    )
+            if isinstance(d, domains.Domain) and self.backend == "rod":
+                raise ValueError("backend 'rod' babbles the rod's own media only, by name")
         if self.n_steps < 1 or self.chunk < 1:
             raise ValueError("duration_s must cover at least one control period; chunk >= 1")
         if not 0 < self.hold_min_steps <= self.hold_max_steps:
@@ -448,14 +458,15 @@ def babble(
         desc=f"babbling ({backend})",
     ) as bar:
         for domain in config.domains:
+            name = domains.resolve(domain).name
             if backend == "rod":
                 arm = _load_rod(domain)
             else:
                 arm = arm_lib.load(model_path, domain, xml=xml)
             sharded = ShardedRollout(arm) if backend == "mjx" else None
             for split, n in splits.items():
-                bar.set_postfix_str(f"{domain}/{split}")
-                programs = family_programs(config, n, domain, split)
+                bar.set_postfix_str(f"{name}/{split}")
+                programs = family_programs(config, n, name, split)
                 _check_processes_agree(config, backend, arm, programs)
                 if backend == "rod":
                     poses = rod_babble.simulate_rod(

@@ -97,6 +97,15 @@ def _add_program_options(p: argparse.ArgumentParser) -> None:
         " source,aged (one shared task-space normalisation over the listed domains)",
     )
     p.add_argument(
+        "--domain-file",
+        nargs="+",
+        default=[],
+        metavar="JSON",
+        help='media off the pair, babbled after --domain\'s: each a {"domain": {"name": ...,'
+        " <Domain fields>}} file (e.g. 5x D_s's drag), its files named by its name and its"
+        " programs from that name's stream",
+    )
+    p.add_argument(
         "--n", type=_int_at_least(0), default=PAPER.n_train, help="training trajectories per domain"
     )
     p.add_argument(
@@ -293,6 +302,29 @@ def check_distributed_args(args: argparse.Namespace) -> None:
         )
 
 
+def read_babble_domain(path: str) -> domains.Domain:
+    """The Domain of a ``{"domain": {"name": ..., <fields>}}`` file, under its own name (unlike
+    `mjx_arm.domains.read_domain_file`, which names every file's Domain "identified": a
+    babbled medium is a truth, and its files and streams carry its name).
+
+    Raises:
+      ValueError: one line naming the file: unreadable, not that layout, no name, an unknown
+        field or a value `Domain` refuses.
+    """
+
+    try:
+        content = json.loads(Path(path).read_text())
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as err:
+        raise ValueError(f"--domain-file {path}: {err}") from None
+    fields = content.get("domain") if isinstance(content, dict) else None
+    if not isinstance(fields, dict) or not isinstance(fields.get("name"), str):
+        raise ValueError(f'--domain-file {path}: expected {{"domain": {{"name": ..., ...}}}}')
+    try:
+        return domains.Domain(**fields)
+    except (TypeError, ValueError) as err:
+        raise ValueError(f"--domain-file {path}: {err}") from None
+
+
 def config_from_args(args: argparse.Namespace) -> BabbleConfig:
     """Builds the BabbleConfig of parsed arguments (their defaults are `PAPER`'s).
 
@@ -300,6 +332,8 @@ def config_from_args(args: argparse.Namespace) -> BabbleConfig:
       ValueError: the options are inconsistent (e.g. a domain twice, holds min > max).
     """
     names = ("source", "constrained") if args.domain == "both" else args.domain.split(",")
+    names = tuple(name.strip() for name in names)
+    names += tuple(read_babble_domain(path) for path in args.domain_file)
     return dataclasses.replace(
         PAPER,
         seed=args.seed,
@@ -308,7 +342,7 @@ def config_from_args(args: argparse.Namespace) -> BabbleConfig:
         duration_s=args.duration,
         hold_min_s=args.hold_min,
         hold_max_s=args.hold_max,
-        domains=tuple(name.strip() for name in names),
+        domains=names,
         backend=args.backend,
         chunk=args.chunk,
         programs=args.programs,
