@@ -189,12 +189,14 @@ def main(argv=None) -> None:
     owners = [("stretch", None)] * len(programs)
     ks = {"stretch": a.stretch_k}
     for name, seeds in translators.items():
+        seed_ks = []
         for s_i, tr in enumerate(seeds):
             for program, target in zip(programs, x_rod, strict=True):
                 commands, k = tr.translate(program, target)
                 runs.append((commands[k - 1 :: k], k))
                 owners.append((name, s_i))
-            ks[name] = k
+            seed_ks.append(k)
+        ks[name] = seed_ks[0] if len(set(seed_ks)) == 1 else seed_ks  # each seed holds its own
     poses = held_rollouts(rod_c, runs)
     print(f"{len(runs)} rollouts in {where} ({time.perf_counter() - t0:.0f} s)")
     n = len(programs)
@@ -215,7 +217,7 @@ def main(argv=None) -> None:
         f" of their seeds) in {where} in {a.target_domain_file or a.target_domain} against its"
         " own D_s path;"
         f" {a.duration_s:g} s programs; k: "
-        + ", ".join(f"{name} {k}" for name, k in ks.items())
+        + ", ".join(f"{name} {'/'.join(map(str, np.atleast_1d(k)))}" for name, k in ks.items())
         + f". Families {', '.join(UNSEEN_FAMILIES)} are in no chain distillation's training.",
         "",
         "| family | programs | "

@@ -81,3 +81,26 @@ def test_a_domain_file_is_refused_for_the_rod(tmp_path, capsys):
     with pytest.raises(SystemExit):
         rod_transfer.main(["--target-domain-file", str(medium), "--out", str(tmp_path / "t")])
     assert "--simulator chain" in capsys.readouterr().err
+
+
+def test_seeds_of_different_k_are_each_reported(tmp_path, monkeypatch):
+    """A translator whose seeds hold different k (CCGAN-GP's choice per seed) records each."""
+    import json
+
+    class Held:
+        def __init__(self, k):
+            self.k = k
+
+        def translate(self, program, target):  # stretch only at this seed's k
+            return np.repeat(program, self.k, axis=0), self.k
+
+    ks = iter([5, 10])
+    monkeypatch.setattr(rod_transfer, "load_translator", lambda path: Held(next(ks)))
+    rod_transfer.main([
+        "--translators", "two=a.ckpt,b.ckpt", "--simulator", "chain", "--target-domain", "aged",
+        "--stretch-k", "5", "--n-shape-like", "0", "--n-other", "1", "--duration-s", "2",
+        "--out", str(tmp_path / "t"),
+    ])  # fmt: skip
+    result = json.loads((tmp_path / "t.json").read_text())
+    assert result["k"] == {"stretch": 5, "two": [5, 10]}
+    assert "two 5/10" in (tmp_path / "t.md").read_text()
