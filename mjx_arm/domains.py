@@ -244,19 +244,21 @@ class DomainFile:
         }
 
 
-def read_domain_file(path: str | os.PathLike) -> DomainFile:
+def read_domain_file(path: str | os.PathLike, keep_name: bool = False) -> DomainFile:
     """Reads a Domain from a JSON file: `python -m mjx_arm.identify`'s identify.json (the fitted
     domain of its one method; of several, the one with the lowest held-out tip RMS, the
     identification's own score on the target's held-out programs), or a plain
     ``{"domain": {<Domain fields>}}`` (fields left out keep their defaults; null where a field
     allows None). The Domain is renamed `IDENTIFIED` whatever the file calls it, so that a
-    teaching arm is never taken for a built-in medium.
+    teaching arm is never taken for a built-in medium; with `keep_name` it keeps the name the
+    file must give (a medium babbled as a truth, `mjx_arm.babble --domain-file`, whose files
+    and program streams carry its name).
 
     Raises:
       FileNotFoundError: no file at `path`.
       ValueError: one line naming the file and the problem: not JSON, neither layout, an
         identify.json without results, an unknown Domain field, or a value `Domain` refuses
-        (not a real number, not finite and > 0).
+        (not a real number, not finite and > 0); with `keep_name`, a Domain without a name.
     """
     raw_path = Path(path)
     if not raw_path.is_file():
@@ -295,8 +297,10 @@ def read_domain_file(path: str | os.PathLike) -> DomainFile:
         raise ValueError(
             f"domain file {path}: unknown Domain fields {unknown}; known: {sorted(known)}"
         )
+    if keep_name and not isinstance(fields.get("name"), str):
+        raise ValueError(f'domain file {path}: its domain needs a "name"')
     try:
-        domain = Domain(**(fields | {"name": IDENTIFIED}))
+        domain = Domain(**(fields if keep_name else fields | {"name": IDENTIFIED}))
     except (TypeError, ValueError) as err:
         raise ValueError(f"domain file {path}: {err}") from None
     digest = hashlib.sha256(data).hexdigest()

@@ -17,13 +17,13 @@ Only the teacher's programs are used: no held-out medium and no test shape.
 
     python -m studies.range_capacity --parts runs/media_range/part{0,1,2,3} \\
         --translator studies/results/h200/media_range/full/range/translator_seed0.ckpt \\
-        --hidden 32 96 --steps 300 --out studies/results/cpu/range_capacity/range_capacity
+        --hidden 32 96 --steps 600 --learning-rate 5e-5 --loss-every 100 \\
+        --out studies/results/cpu/range_capacity/range_capacity
 """
 
 from __future__ import annotations
 
 import dataclasses
-import tempfile
 import time
 from pathlib import Path
 
@@ -59,8 +59,7 @@ def main(argv=None) -> None:
     import jax.numpy as jnp
 
     t0 = time.perf_counter()
-    with tempfile.TemporaryDirectory() as tmp:  # the range's settings, as its CLI builds them
-        _, _, range_config, config = range_cli.parse(["--out", tmp])
+    range_config, config = range_cli.preset_configs()  # the range's one-GPU settings
     config = dataclasses.replace(config, learning_rate=a.learning_rate, final_lr_factor=1.0)
     arm_s, arm_c = (mjx_arm.load(domain=d) for d in ("source", "constrained"))
     training, media_range = plan_media(range_config, arm_c)

@@ -26,7 +26,6 @@ planned under other settings stops it.
 
 from __future__ import annotations
 
-import tempfile
 import time
 from pathlib import Path
 
@@ -79,8 +78,7 @@ def main(argv=None) -> None:
     if a.n_train_scored < 1:
         p.error("--n-train-scored must be >= 1")
     t0 = time.perf_counter()
-    with tempfile.TemporaryDirectory() as tmp:  # the range's settings, as its CLI builds them
-        _, _, range_config, config = range_cli.parse(["--out", tmp])
+    range_config, config = range_cli.preset_configs()  # the range's one-GPU settings
     arm_s, arm_c = (mjx_arm.load(domain=d) for d in ("source", "constrained"))
     training, media_range = plan_media(range_config, arm_c)
     teacher = teacher_from_parts(a.parts, config, training, arm_s, arm_c)

@@ -507,3 +507,16 @@ def test_a_reference_is_scored_over_its_seeds_files(tmp_path, capsys):
     ])  # fmt: skip
     row = json.loads((tmp_path / "t.json").read_text())["rows"][0]
     assert "per-medium aged_sim (k 25, 3 seeds)" in row["x_err_cm"]
+
+
+def test_the_preset_configs_are_the_cli_runs_own(tmp_path, monkeypatch):
+    """`cli.preset_configs` (the studies' way to read a run's settings) gives what a run of the
+    command with no other flags parses, and writes and locks nothing."""
+    for quick in (False, True):
+        argv = [*(["--quick"] if quick else []), "--out", str(tmp_path / "runs" / f"o{quick}")]
+        _, _, range_config, config = cli.parse(argv)
+        monkeypatch.chdir(tmp_path / "runs")
+        before = sorted(p.name for p in (tmp_path / "runs").iterdir())
+        assert cli.preset_configs(quick) == (range_config, config)
+        assert sorted(p.name for p in (tmp_path / "runs").iterdir()) == before
+    assert config.teacher_backend == "mjx" and range_config.n_media == 3

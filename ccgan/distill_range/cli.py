@@ -122,10 +122,7 @@ def parse(argv: list[str] | None, doc: str = __doc__):
     argv = list(sys.argv[1:] if argv is None else argv)
     p = build_parser(doc)
     a = p.parse_args((QUICK_SETTINGS if "--quick" in argv else PAPER_SETTINGS) + argv)
-    range_config = config_from_args(p, a, RangeConfig)
-    a.train_sets = range_config.n_media  # n_train etc. are per medium
-    config = config_from_args(p, a, DistillConfig, skip=FIXED)
-    config = dataclasses.replace(config, teacher_backend="mjx")
+    range_config, config = configs_from_args(p, a)
     if a.seeds is not None and len(a.seeds) != len(a.translators):
         p.error("give one seed per translator file")
     seeds = a.seeds if a.seeds is not None else list(range(len(a.translators)))
@@ -134,6 +131,23 @@ def parse(argv: list[str] | None, doc: str = __doc__):
     a.seeds = seeds
     lock_output_dir(p, "--out", a.out)  # one writer per folder: its teacher.npz is rewritten
     return p, a, range_config, config
+
+
+def configs_from_args(p: argparse.ArgumentParser, a) -> tuple[RangeConfig, DistillConfig]:
+    """(RangeConfig, DistillConfig) of parsed flags: n_train etc. per medium, the MJX teacher."""
+    range_config = config_from_args(p, a, RangeConfig)
+    a.train_sets = range_config.n_media  # n_train etc. are per medium
+    config = config_from_args(p, a, DistillConfig, skip=FIXED)
+    return range_config, dataclasses.replace(config, teacher_backend="mjx")
+
+
+def preset_configs(quick: bool = False) -> tuple[RangeConfig, DistillConfig]:
+    """The configs a run of `python -m ccgan.distill_range` with no other flags uses (its
+    preset: `QUICK_SETTINGS` or `PAPER_SETTINGS`), without a folder to lock: for studies
+    that read a run's teacher (`studies.range_fit`)."""
+    p = build_parser()
+    a = p.parse_args([*(QUICK_SETTINGS if quick else PAPER_SETTINGS), "--out", "unused"])
+    return configs_from_args(p, a)
 
 
 def start_translators(

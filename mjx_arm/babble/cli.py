@@ -303,26 +303,17 @@ def check_distributed_args(args: argparse.Namespace) -> None:
 
 
 def read_babble_domain(path: str) -> domains.Domain:
-    """The Domain of a ``{"domain": {"name": ..., <fields>}}`` file, under its own name (unlike
-    `mjx_arm.domains.read_domain_file`, which names every file's Domain "identified": a
-    babbled medium is a truth, and its files and streams carry its name).
+    """The Domain of a ``{"domain": {"name": ..., <fields>}}`` file under its own name
+    (`mjx_arm.domains.read_domain_file` with `keep_name`: a babbled medium is a truth, and its
+    files and streams carry its name).
 
     Raises:
-      ValueError: one line naming the file: unreadable, not that layout, no name, an unknown
-        field or a value `Domain` refuses.
+      ValueError: one line naming the flag and the file's problem.
     """
-
     try:
-        content = json.loads(Path(path).read_text())
-    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as err:
-        raise ValueError(f"--domain-file {path}: {err}") from None
-    fields = content.get("domain") if isinstance(content, dict) else None
-    if not isinstance(fields, dict) or not isinstance(fields.get("name"), str):
-        raise ValueError(f'--domain-file {path}: expected {{"domain": {{"name": ..., ...}}}}')
-    try:
-        return domains.Domain(**fields)
-    except (TypeError, ValueError) as err:
-        raise ValueError(f"--domain-file {path}: {err}") from None
+        return domains.read_domain_file(path, keep_name=True).domain
+    except (FileNotFoundError, ValueError) as err:
+        raise ValueError(f"--domain-file: {err}") from None
 
 
 def config_from_args(args: argparse.Namespace) -> BabbleConfig:
