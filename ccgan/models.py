@@ -489,7 +489,7 @@ def with_hidden(generator: Generator, g_params, hidden: int, seed: int = 0):
     inputs) and their biases are the wider G's own initialisation (`seed`). The old units then
     never read a new one, so the output is the trained G's (to float rounding: sums with zero
     terms), while the new units run and their zero rows get gradients from the first step. For
-    a conditioned G over many media (issue 51), whose 32 units fit 24 media's teacher 4-8x
+    a conditioned G over many media (issue 51), whose 32 units fit 24 media's teacher 4-9x
     worse than one medium's (`studies/results/cpu/range_fit/`).
 
     Args:

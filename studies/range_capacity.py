@@ -1,7 +1,7 @@
 """Is G_c's width what holds the conditioned translator back? (issue 51)
 
 `studies.range_fit` found the range translator under-fitting its teacher: as far from it on its
-training programs as on held-out ones, with a training loss 4-8x a one-medium distillation's.
+training programs as on held-out ones, with a training loss 4-9x a one-medium distillation's.
 This study continues the committed range translator's training (one seed) for `--steps` Adam
 steps at one constant step size, at its own width and widened (`ccgan.models.with_hidden`,
 which keeps its output), every variant on the same batches in the same order, and reports:
